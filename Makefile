@@ -1,0 +1,43 @@
+# The README's two commands are `make demo` and `make test`. Each does its own
+# set-up on a fresh machine: it creates .venv and installs the project with its
+# test and dev extras the first time (and again when pyproject.toml changes).
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+PKGS   := serialsocket tcpstream linksim
+
+.PHONY: demo test lint typecheck pytest fuzz bench-codec clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test,dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	printf 'Move arm to the rock, then weigh it.\x00\x01\xff' \
+	  | $(PY) -m serialsocket encode --type D --seq 1 \
+	  | tee /dev/stderr | $(PY) -m serialsocket decode
+
+test: lint typecheck pytest
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check $(PKGS) tests fuzz
+	$(VENV)/bin/ruff format --check $(PKGS) tests fuzz
+
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy --strict $(PKGS)
+
+pytest: $(STAMP)
+	$(PY) -m pytest -q
+
+fuzz: $(STAMP)
+	HYPOTHESIS_PROFILE=deep $(PY) -m pytest -q fuzz
+
+bench-codec: $(STAMP)
+	$(PY) -m linksim bench codec
+
+clean:
+	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,7 @@
+"""``python -m serialsocket``: see :mod:`serialsocket._cli`."""
+
+import sys
+
+from ._cli import main
+
+sys.exit(main())

@@ -1,0 +1,62 @@
+"""Kermit block checks, types 1, 2 and 3 (reference/kermit.md section 2).
+
+Every check covers the characters from LEN through the last DATA character, as
+sent (after prefix encoding): MARK, CHECK and EOL are excluded; in extended
+packets LENX1, LENX2 and HCHECK are included.
+
+Type 3 is CRC-16/KERMIT (poly 0x1021 reflected, init 0, no final XOR; check
+value 0x2189 for "123456789").  It is computed by crcmod's predefined
+``kermit`` function (a C extension), *not* :func:`binascii.crc_hqx`, which is
+CRC-16/XMODEM.  The 16-bit value is sent high to low as 4+6+6 bits through
+``tochar``, not byte-swapped.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+
+import crcmod.predefined
+
+__all__ = ["BlockCheck", "check_chars", "check_length", "crc16_kermit"]
+
+crc16_kermit: Callable[[bytes], int] = crcmod.predefined.mkCrcFun("kermit")
+"""CRC-16/KERMIT of a byte string (crcmod's C implementation when available)."""
+
+
+class BlockCheck(enum.IntEnum):
+    """Block check types (Kermit manual section 6.2; CHKT field of the Send-Init)."""
+
+    SUM6 = 1
+    """Type 1: 6-bit folded arithmetic sum, one character."""
+    SUM12 = 2
+    """Type 2: 12-bit arithmetic sum, two characters.  Avoid: E-Kermit and
+    G-Kermit compare it against the unmasked sum and reject packets whose sum
+    is >= 4096 (reference/kermit.md section 2)."""
+    CRC16 = 3
+    """Type 3: CRC-16/KERMIT, three characters.  telelink's default."""
+
+
+def check_length(check: BlockCheck) -> int:
+    """Number of characters the check occupies in a packet (1, 2 or 3)."""
+    return int(check)
+
+
+def check_chars(check: BlockCheck, covered: bytes) -> bytes:
+    """The printable check characters for ``covered`` (LEN through DATA).
+
+    Args:
+        check: the block check type in force for this packet.
+        covered: the exact bytes from LEN through the last DATA byte.
+
+    Returns:
+        1, 2 or 3 bytes, each in 32..95.
+    """
+    if check is BlockCheck.CRC16:
+        crc = crc16_kermit(covered)
+        return bytes(((crc >> 12 & 0x0F) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32))
+    s = sum(covered)
+    if check is BlockCheck.SUM6:
+        return bytes((((s + ((s & 0xC0) >> 6)) & 0x3F) + 32,))
+    s &= 0xFFF
+    return bytes(((s >> 6 & 0x3F) + 32, (s & 0x3F) + 32))

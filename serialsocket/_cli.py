@@ -1,0 +1,159 @@
+"""Command line: ``python -m serialsocket encode|decode`` (the packet inspector).
+
+``encode`` reads payload bytes on stdin and writes wire packets on stdout;
+``decode`` reads wire bytes on stdin and prints one JSON object per packet or
+per rejected chunk.  ``encode | decode --raw`` reproduces the input exactly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+from ._checks import BlockCheck
+from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
+from ._errors import LocalProtocolError, MalformedDataError
+from ._packet import Packet, build_packet, data_capacity
+from ._parser import PacketParser, PacketReceived
+from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, SEQ_MODULUS
+
+__all__ = ["main"]
+
+_PROFILES: dict[str, Encoding] = {"printable": PRINTABLE, "8bit": EIGHT_BIT_CLEAN}
+_READ_LIMIT = 64 * 1024 * 1024
+"""The inspector holds its input in memory; refuse more than this rather than swap."""
+
+
+def _check(value: str) -> BlockCheck:
+    try:
+        return BlockCheck(int(value))
+    except ValueError:
+        raise argparse.ArgumentTypeError("block check must be 1, 2 or 3") from None
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m serialsocket",
+        description="Kermit packet inspector for the serialsocket wire format.",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    enc = sub.add_parser("encode", help="stdin payload -> wire packets on stdout")
+    enc.add_argument("--type", default="D", help="packet type letter (default D)")
+    enc.add_argument("--seq", type=int, default=0, help="first sequence number, 0..63")
+    enc.add_argument("--check", type=_check, default=BlockCheck.CRC16, help="block check 1/2/3")
+    enc.add_argument(
+        "--max-len",
+        type=int,
+        default=DEFAULT_MAX_PACKET_LENGTH,
+        help=f"maximum packet length, MARK through CHECK (default {DEFAULT_MAX_PACKET_LENGTH})",
+    )
+    enc.add_argument("--profile", choices=sorted(_PROFILES), default="printable")
+    enc.add_argument("--hex", action="store_true", help="print hex, one packet per line")
+
+    dec = sub.add_parser("decode", help="wire bytes on stdin -> one JSON object per packet")
+    dec.add_argument("--check", type=_check, default=BlockCheck.CRC16, help="block check 1/2/3")
+    dec.add_argument(
+        "--init-check",
+        type=_check,
+        default=BlockCheck.SUM6,
+        help="block check of S/I packets (1, or 3 for FORCE-3)",
+    )
+    dec.add_argument("--max-len", type=int, default=MAX_PACKET_LENGTH)
+    dec.add_argument("--profile", choices=sorted(_PROFILES), default="printable")
+    dec.add_argument("--hex", action="store_true", help="stdin is hex text, not raw bytes")
+    dec.add_argument(
+        "--raw", action="store_true", help="write the decoded payloads to stdout instead of JSON"
+    )
+    return ap
+
+
+def _read_stdin() -> bytes:
+    data = sys.stdin.buffer.read(_READ_LIMIT + 1)
+    if len(data) > _READ_LIMIT:
+        raise LocalProtocolError(f"input larger than {_READ_LIMIT} bytes: split it")
+    return data
+
+
+def _encode(args: argparse.Namespace) -> int:
+    payload = _read_stdin()
+    encoding = _PROFILES[args.profile]
+    capacity = data_capacity(args.max_len, args.check)
+    seq = args.seq
+    out = sys.stdout.buffer
+    view = memoryview(payload)
+    while True:
+        field, used = encoding.encode_prefix(view, capacity)
+        wire = build_packet(Packet(seq=seq, type=args.type, data=field), args.check)
+        out.write(wire.hex().encode() + b"\n" if args.hex else wire)
+        view = view[used:]
+        seq = (seq + 1) % SEQ_MODULUS
+        if not view:
+            break
+    out.flush()
+    return 0
+
+
+def _decode(args: argparse.Namespace) -> int:
+    data = _read_stdin()
+    if args.hex:
+        data = bytes.fromhex(data.decode("ascii", "replace").replace("\n", " "))
+    parser = PacketParser(max_length=args.max_len, check=args.check, init_check=args.init_check)
+    parser.receive_data(data)
+    encoding = _PROFILES[args.profile]
+    out = sys.stdout
+    bad = 0
+    while (event := parser.next_event()) is not None:
+        if isinstance(event, PacketReceived):
+            pkt = event.packet
+            record: dict[str, object] = {
+                "seq": pkt.seq,
+                "type": str(pkt.type),
+                "check_ok": True,
+                "extended": event.extended,
+                "length": event.length,
+            }
+            try:
+                payload = encoding.decode(pkt.data)
+            except MalformedDataError as exc:
+                record["decode_error"] = str(exc)
+                record["field_hex"] = pkt.data.hex()
+                bad += 1
+                payload = b""
+            else:
+                record["data_hex"] = payload.hex()
+            if args.raw:
+                sys.stdout.buffer.write(payload)
+                continue
+        else:
+            bad += 1
+            record = {"rejected": event.reason.value, "length": event.length}
+            if event.seq is not None:
+                record["seq"] = event.seq
+            if event.type is not None:
+                record["type"] = event.type
+            record["raw_hex"] = event.raw.hex()
+            if args.raw:
+                continue
+        out.write(json.dumps(record) + "\n")
+    if parser.buffered:
+        leftover = {"rejected": "incomplete", "length": parser.buffered}
+        if not args.raw:
+            out.write(json.dumps(leftover) + "\n")
+        bad += 1
+    out.flush()
+    return 1 if bad and args.raw else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the inspector; returns the process exit status."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "encode":
+            return _encode(args)
+        return _decode(args)
+    except LocalProtocolError as exc:
+        print(f"serialsocket: {exc}", file=sys.stderr)
+        return 2

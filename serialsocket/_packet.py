@@ -1,0 +1,135 @@
+"""Kermit packets: the frozen record and its wire form.
+
+Wire layout (reference/kermit.md section 1)::
+
+    normal:    MARK LEN SEQ TYPE DATA... CHECK [EOL]                 LEN = tochar(3..94)
+    extended:  MARK ' ' SEQ TYPE LENX1 LENX2 HCHECK DATA... CHECK [EOL]
+
+A packet is built normal when ``len(DATA) + len(CHECK) + 2 <= 94`` and extended
+otherwise, exactly as kermit.c, gkermit.c and ckcfn2.c decide (C-Kermit once
+built LEN 95/96 as normal packets and produced unreadable LEN bytes; that
+boundary is tested).  Packet *lengths* in this package count MARK through
+CHECK; see :data:`~serialsocket._wire.DEFAULT_MAX_PACKET_LENGTH`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ._checks import BlockCheck, check_chars
+from ._errors import LocalProtocolError
+from ._wire import (
+    CR,
+    EXTENDED_HEADER_LENGTH,
+    MARK,
+    MAX_EXTENDED_FIELD,
+    MAX_NORMAL_LEN,
+    MAX_PACKET_LENGTH,
+    MIN_PACKET_LENGTH,
+    NORMAL_HEADER_LENGTH,
+    SEQ_MODULUS,
+    PacketType,
+)
+
+__all__ = ["Packet", "build_packet", "data_capacity", "packet_length"]
+
+_KNOWN_TYPES = {t.value: t for t in PacketType}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Packet:
+    """One Kermit packet.
+
+    Attributes:
+        seq: sequence number, 0..63.
+        type: the type letter.  Known letters are :class:`PacketType` members
+            (a ``StrEnum``, so ``packet.type == "D"`` works); unknown printable
+            letters from a peer are kept as plain one-character strings.
+        data: the data field exactly as on the wire, i.e. prefix-encoded.  Use
+            :class:`~serialsocket.Encoding` to encode and decode it.
+
+    Raises:
+        LocalProtocolError: ``seq`` is out of range, ``type`` is not one
+            printable character, or ``data`` contains the packet MARK (which
+            would cut the packet in two on the line).
+    """
+
+    seq: int
+    type: str
+    data: bytes = b""
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.seq < SEQ_MODULUS:
+            raise LocalProtocolError(f"sequence number {self.seq} is outside 0..63")
+        if len(self.type) != 1 or not 33 <= ord(self.type) <= 126:
+            raise LocalProtocolError(f"packet type {self.type!r} is not one printable character")
+        if self.type in _KNOWN_TYPES and not isinstance(self.type, PacketType):
+            object.__setattr__(self, "type", _KNOWN_TYPES[self.type])
+        if MARK in self.data:
+            raise LocalProtocolError(
+                "a data field must not contain the MARK (SOH): encode it first"
+            )
+
+
+def packet_length(data_length: int, check: BlockCheck) -> int:
+    """Length of a packet from MARK through CHECK for a data field of this size."""
+    field = data_length + int(check)
+    if field + 2 <= MAX_NORMAL_LEN:
+        return NORMAL_HEADER_LENGTH + field
+    return EXTENDED_HEADER_LENGTH + field
+
+
+def data_capacity(max_length: int, check: BlockCheck) -> int:
+    """Largest data field whose packet fits in ``max_length`` (MARK through CHECK).
+
+    Raises:
+        LocalProtocolError: ``max_length`` is outside
+            ``MIN_PACKET_LENGTH..MAX_PACKET_LENGTH`` (12..9031).
+    """
+    if not MIN_PACKET_LENGTH <= max_length <= MAX_PACKET_LENGTH:
+        raise LocalProtocolError(
+            f"maximum packet length {max_length} is outside "
+            f"{MIN_PACKET_LENGTH}..{MAX_PACKET_LENGTH} (MARK through CHECK)"
+        )
+    normal = min(max_length - NORMAL_HEADER_LENGTH, MAX_NORMAL_LEN - 2) - int(check)
+    extended = max_length - EXTENDED_HEADER_LENGTH - int(check)
+    return max(normal, extended)
+
+
+def build_packet(
+    packet: Packet,
+    check: BlockCheck = BlockCheck.CRC16,
+    *,
+    eol: int | None = CR,
+    padding: bytes = b"",
+) -> bytes:
+    """Serialise a packet to wire bytes.
+
+    Args:
+        packet: the packet; its data field must already be encoded.
+        check: the block check to append (the negotiated one; type 1 for the
+            Send-Init exchange unless FORCE-3 was agreed).
+        eol: the end-of-line byte appended after the check, or None.
+        padding: bytes sent before the MARK when the peer asked for padding.
+
+    Returns:
+        ``padding + MARK ... CHECK + EOL``.
+
+    Raises:
+        LocalProtocolError: the data field is larger than an extended packet
+            can carry (9024 data+check characters).
+    """
+    data = packet.data
+    field = len(data) + int(check)
+    if field + 2 <= MAX_NORMAL_LEN:
+        head = bytes((field + 2 + 32, packet.seq + 32, ord(packet.type)))
+    elif field <= MAX_EXTENDED_FIELD:
+        hdr = bytes((32, packet.seq + 32, ord(packet.type), field // 95 + 32, field % 95 + 32))
+        head = hdr + check_chars(BlockCheck.SUM6, hdr)
+    else:
+        raise LocalProtocolError(
+            f"data field of {len(data)} characters exceeds the Kermit maximum packet"
+        )
+    covered = head + data
+    tail = b"" if eol is None else bytes((eol,))
+    return b"".join((padding, b"\x01", covered, check_chars(check, covered), tail))

@@ -1,0 +1,340 @@
+"""Incremental Kermit packet parser (sans-I/O).
+
+Strategy
+--------
+Feed any chunks with :meth:`PacketParser.receive_data`, then call
+:meth:`PacketParser.next_event` until it returns ``None``.  The pull style lets
+the layer above change the expected block check between two packets that came
+in the same chunk (after the init exchange the check switches from type 1 to
+CRC-16, and the very next packet may already be in the buffer).
+
+The parser is built on one fact: the MARK (SOH) never occurs inside a packet.
+LEN, SEQ, TYPE and CHECK are printable, and every Kermit encoder prefixes SOH
+in data.  So:
+
+* bytes before a MARK are inter-packet filler (CR, LF, NUL padding: silently
+  skipped) or garbage (reported as one ``garbage`` rejection per run);
+* a MARK inside a packet that is still arriving means the packet was cut short:
+  it is rejected as ``truncated`` at once and parsing restarts at that MARK,
+  without waiting for bytes that will never come;
+* after any rejection the parser discards everything up to the next MARK, so
+  one damaged packet costs one rejection event, not a cascade.
+
+Every damaged input is a counted :class:`PacketRejected` event, never an
+exception.  The buffer never holds more than one packet of ``max_length`` plus
+the bytes of the last chunk that follow it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from ._checks import BlockCheck, check_chars
+from ._errors import LocalProtocolError
+from ._packet import Packet
+from ._wire import (
+    DEFAULT_MAX_PACKET_LENGTH,
+    EXTENDED_HEADER_LENGTH,
+    MARK,
+    MAX_PACKET_LENGTH,
+    MIN_PACKET_LENGTH,
+    NORMAL_HEADER_LENGTH,
+    PacketType,
+)
+
+__all__ = [
+    "PacketParser",
+    "PacketReceived",
+    "PacketRejected",
+    "ParserEvent",
+    "ParserStatistics",
+    "RejectReason",
+]
+
+_SAMPLE = 256
+"""Rejected bytes kept in an event: enough to read a packet trace, bounded for floods."""
+
+_FILLER = b"\r\n\x00"
+"""Bytes silently skipped between packets: EOL, LF that some hosts add, NUL padding."""
+
+_INIT_TYPES = frozenset({PacketType.SEND_INIT.value, PacketType.INIT.value})
+
+
+class RejectReason(enum.StrEnum):
+    """Why bytes were dropped; the strings appear in the packet inspector's output."""
+
+    GARBAGE = "garbage"
+    """Bytes outside any packet that are not EOL/LF/NUL filler."""
+    BAD_LENGTH = "bad length"
+    """LEN is not a printable 3..94 (or blank), or too small for the check."""
+    BAD_HEADER = "bad header"
+    """SEQ or TYPE is not printable, or the extended header check (HCHECK) failed."""
+    TOO_LONG = "too long"
+    """The packet announces more than ``max_length`` characters."""
+    TRUNCATED = "truncated"
+    """A new MARK arrived before the packet was complete."""
+    BAD_CHECK = "bad check"
+    """The block check does not match."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PacketReceived:
+    """A packet whose block check verified.
+
+    Attributes:
+        packet: the packet (data still prefix-encoded).
+        extended: True for the extended (long) format.
+        check: the block check that verified it.
+        length: characters from MARK through CHECK.
+    """
+
+    packet: Packet
+    extended: bool
+    check: BlockCheck
+    length: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PacketRejected:
+    """Bytes the parser dropped.
+
+    Attributes:
+        reason: why.
+        raw: the dropped bytes, at most 256 of them.
+        length: how many bytes were dropped in this event.
+        seq: the sequence number the damaged packet claimed, if it got that
+            far (untrustworthy by definition; for traces only).
+        type: likewise, its type letter.
+    """
+
+    reason: RejectReason
+    raw: bytes
+    length: int
+    seq: int | None = None
+    type: str | None = None
+
+
+ParserEvent = PacketReceived | PacketRejected
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ParserStatistics:
+    """Counters since the parser was created.
+
+    Attributes:
+        packets: packets accepted.
+        rejected: rejection events, by reason value.
+        garbage_bytes: bytes dropped as garbage or as the tail of a rejected
+            packet (filler excluded).
+        filler_bytes: CR/LF/NUL skipped between packets.
+        resyncs: times the parser had to hunt for a new MARK after damage.
+    """
+
+    packets: int
+    rejected: dict[str, int]
+    garbage_bytes: int
+    filler_bytes: int
+    resyncs: int
+
+
+class PacketParser:
+    """Turns a byte stream into :class:`PacketReceived` / :class:`PacketRejected` events.
+
+    Args:
+        max_length: the largest packet accepted, MARK through CHECK (the
+            negotiated receive maximum).  Longer packets are rejected as
+            ``too long`` and bound the buffer.
+        check: the block check expected on ordinary packets.
+        init_check: the block check of S and I packets: type 1 as Kermit
+            requires, or CRC-16 when FORCE-3 ("5") was agreed.
+
+    ``check``, ``init_check`` and ``max_length`` may be changed between calls
+    to :meth:`next_event`; the change applies to the next packet.
+    """
+
+    def __init__(
+        self,
+        *,
+        max_length: int = DEFAULT_MAX_PACKET_LENGTH,
+        check: BlockCheck = BlockCheck.CRC16,
+        init_check: BlockCheck = BlockCheck.SUM6,
+    ) -> None:
+        self.max_length = max_length
+        self.check = check
+        self.init_check = init_check
+        self._buf = bytearray()
+        self._discarding = False
+        self._packets = 0
+        self._rejected: dict[str, int] = {}
+        self._garbage = 0
+        self._filler = 0
+        self._resyncs = 0
+
+    @property
+    def max_length(self) -> int:
+        """Largest packet accepted, MARK through CHECK."""
+        return self._max_length
+
+    @max_length.setter
+    def max_length(self, value: int) -> None:
+        if not MIN_PACKET_LENGTH <= value <= MAX_PACKET_LENGTH:
+            raise LocalProtocolError(
+                f"max_length {value} is outside {MIN_PACKET_LENGTH}..{MAX_PACKET_LENGTH}"
+            )
+        self._max_length = value
+
+    @property
+    def buffered(self) -> int:
+        """Bytes held waiting for the rest of a packet."""
+        return len(self._buf)
+
+    def receive_data(self, data: bytes | bytearray | memoryview) -> None:
+        """Append bytes from the line.  Call :meth:`next_event` until it returns None."""
+        self._buf += data
+
+    def next_event(self) -> ParserEvent | None:
+        """The next packet or rejection, or None when more bytes are needed."""
+        buf = self._buf
+        while buf:
+            if buf[0] != MARK:
+                event = self._skip_to_mark()
+                if event is not None:
+                    return event
+                continue
+            self._discarding = False
+            if len(buf) < 2:
+                return None
+            total = self._frame_length()
+            if isinstance(total, PacketRejected):
+                return total
+            # A MARK inside the frame (or inside what has arrived of it) means
+            # this packet was cut short on the line.
+            cut = buf.find(MARK, 1, len(buf) if total is None else total)
+            if cut > 0:
+                return self._reject(RejectReason.TRUNCATED, cut)
+            if total is None or len(buf) < total:
+                return None
+            return self._finish(total)
+        return None
+
+    def statistics(self) -> ParserStatistics:
+        """A snapshot of the counters."""
+        return ParserStatistics(
+            packets=self._packets,
+            rejected=dict(self._rejected),
+            garbage_bytes=self._garbage,
+            filler_bytes=self._filler,
+            resyncs=self._resyncs,
+        )
+
+    def reset(self) -> None:
+        """Drop any partial packet (e.g. when a connection is torn down)."""
+        self._buf.clear()
+        self._discarding = False
+
+    # -- internals ---------------------------------------------------------------
+
+    def _skip_to_mark(self) -> PacketRejected | None:
+        buf = self._buf
+        i = buf.find(MARK)
+        end = len(buf) if i < 0 else i
+        chunk = bytes(buf[:end])
+        del buf[:end]
+        noise = chunk.translate(None, _FILLER)
+        self._filler += end - len(noise)
+        if not noise:
+            return None
+        self._garbage += len(noise)
+        if self._discarding:
+            return None
+        self._discarding = True
+        self._resyncs += 1
+        return self._event(RejectReason.GARBAGE, chunk[:_SAMPLE], len(chunk))
+
+    def _frame_length(self) -> int | PacketRejected | None:
+        """Total length MARK..CHECK announced by the header, a rejection, or
+        None while an extended header is still incomplete."""
+        buf = self._buf
+        ln = buf[1]
+        if ln == 32:
+            if len(buf) < EXTENDED_HEADER_LENGTH:
+                return None
+            header = bytes(buf[1:6])
+            # LENX1/LENX2 must be tochar(0..94): a 6-bit HCHECK alone lets one
+            # damaged header in 64 through, and a control character there would
+            # give a negative length.
+            if not (32 <= buf[4] <= 126 and 32 <= buf[5] <= 126) or (
+                check_chars(BlockCheck.SUM6, header) != buf[6:7]
+            ):
+                return self._reject(RejectReason.BAD_HEADER, 1)
+            total = EXTENDED_HEADER_LENGTH + (buf[4] - 32) * 95 + (buf[5] - 32)
+        elif 35 <= ln <= 126:
+            total = 2 + ln - 32
+        else:
+            return self._reject(RejectReason.BAD_LENGTH, 1)
+        if total > self.max_length:
+            return self._reject(RejectReason.TOO_LONG, 1)
+        return total
+
+    def _finish(self, total: int) -> ParserEvent:
+        buf = self._buf
+        extended = buf[1] == 32
+        seq_c, type_c = buf[2], buf[3]
+        if not (32 <= seq_c <= 95 and 33 <= type_c <= 126):
+            return self._reject(RejectReason.BAD_HEADER, total)
+        ptype = chr(type_c)
+        head = EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH
+        candidates = self._checks_for(ptype, total - head, extended)
+        if not candidates:
+            return self._reject(RejectReason.BAD_LENGTH, total)
+        for check in candidates:
+            n = int(check)
+            covered = bytes(buf[1 : total - n])
+            if check_chars(check, covered) == buf[total - n : total]:
+                packet = Packet(seq=seq_c - 32, type=ptype, data=covered[head - 1 :])
+                del buf[:total]
+                self._packets += 1
+                return PacketReceived(packet=packet, extended=extended, check=check, length=total)
+        return self._reject(RejectReason.BAD_CHECK, total)
+
+    def _checks_for(self, ptype: str, field: int, extended: bool) -> list[BlockCheck]:
+        """Block checks to try, in order, for a packet of this type and field size."""
+        if ptype in _INIT_TYPES:
+            first = self.init_check
+        elif ptype == PacketType.NAK and not extended and 1 <= field <= 3:
+            # A NAK has no data, so its check length is LEN - 2 (ckcfn2.c rpack):
+            # this keeps NAKs readable while the two sides disagree on the check.
+            first = BlockCheck(field)
+        else:
+            first = self.check
+        order = [first]
+        if ptype == PacketType.ERROR and first is not BlockCheck.SUM6:
+            # Peers may send E with a type-1 check whatever is in force (ckcfn2.c).
+            order.append(BlockCheck.SUM6)
+        return [c for c in order if int(c) <= field]
+
+    def _reject(self, reason: RejectReason, upto: int) -> PacketRejected:
+        # Every rejection consumes at least the MARK, so the parser always progresses.
+        upto = max(upto, 1)
+        buf = self._buf
+        raw = bytes(buf[:upto])
+        seq = buf[2] - 32 if len(buf) > 2 and 32 <= buf[2] <= 95 else None
+        ptype = chr(buf[3]) if len(buf) > 3 and 33 <= buf[3] <= 126 else None
+        del buf[:upto]
+        self._garbage += upto
+        self._discarding = True
+        self._resyncs += 1
+        return self._event(reason, raw[:_SAMPLE], upto, seq=seq, ptype=ptype)
+
+    def _event(
+        self,
+        reason: RejectReason,
+        raw: bytes,
+        length: int,
+        *,
+        seq: int | None = None,
+        ptype: str | None = None,
+    ) -> PacketRejected:
+        self._rejected[reason.value] = self._rejected.get(reason.value, 0) + 1
+        return PacketRejected(reason=reason, raw=raw, length=length, seq=seq, type=ptype)

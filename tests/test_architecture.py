@@ -1,0 +1,93 @@
+"""Architecture rules that keep the layers honest (ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import pytest
+
+import serialsocket
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+# Sans-I/O modules: bytes and `now` in, bytes and events out.  Nothing that
+# touches a clock, a socket, a thread, a port or global randomness.
+SANS_IO = ["_checks", "_encoding", "_errors", "_packet", "_parser", "_wire"]
+FORBIDDEN_IN_CORE = {
+    "trio",
+    "serial",
+    "socket",
+    "time",
+    "random",
+    "threading",
+    "asyncio",
+    "os",
+    "select",
+}
+
+
+def imports_of(path: pathlib.Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+@pytest.mark.parametrize("module", SANS_IO)
+def test_core_modules_are_sans_io(module: str) -> None:
+    bad = imports_of(ROOT / "serialsocket" / f"{module}.py") & FORBIDDEN_IN_CORE
+    assert not bad, f"serialsocket/{module}.py imports {bad}"
+
+
+@pytest.mark.parametrize(
+    ("package", "forbidden"),
+    [("serialsocket", {"tcpstream", "linksim"}), ("tcpstream", {"serialsocket", "linksim"})],
+)
+def test_import_direction(package: str, forbidden: set[str]) -> None:
+    for path in (ROOT / package).rglob("*.py"):
+        assert not imports_of(path) & forbidden, f"{path} imports {imports_of(path) & forbidden}"
+
+
+def test_public_names_are_pinned() -> None:
+    assert sorted(serialsocket.__all__) == sorted(
+        [
+            "DEFAULT_MAX_PACKET_LENGTH",
+            "EIGHT_BIT_CLEAN",
+            "MAX_PACKET_LENGTH",
+            "MIN_PACKET_LENGTH",
+            "PRINTABLE",
+            "BlockCheck",
+            "Encoding",
+            "LocalProtocolError",
+            "MalformedDataError",
+            "Packet",
+            "PacketParser",
+            "PacketReceived",
+            "PacketRejected",
+            "PacketType",
+            "ParserEvent",
+            "ParserStatistics",
+            "ProtocolError",
+            "RejectReason",
+            "RemoteProtocolError",
+            "build_packet",
+            "check_chars",
+            "crc16_kermit",
+            "data_capacity",
+            "packet_length",
+        ]
+    )
+    for name in serialsocket.__all__:
+        assert getattr(serialsocket, name) is not None
+
+
+def test_protocol_error_is_abstract() -> None:
+    with pytest.raises(TypeError):
+        serialsocket.ProtocolError("x")
+    err = serialsocket.RemoteProtocolError("peer sent nonsense")
+    assert err.error_hint == "peer sent nonsense"
