@@ -160,6 +160,8 @@ def test_mutations_never_crash_and_good_packets_survive(
         k = data.draw(st.integers(0, len(wires) - 1))
         op = data.draw(st.sampled_from(["flip", "drop", "insert", "truncate"]))
         w = wires[k]
+        if not w:
+            continue
         pos = data.draw(st.integers(0, len(w) - 1))
         if op == "flip":
             w[pos] ^= 1 << data.draw(st.integers(0, 7))
