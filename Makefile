@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	printf 'Move arm to the rock, then weigh it.\x00\x01\xff' \
+	printf 'Move arm to the rock, then weigh it.\000\001\377' \
 	  | $(PY) -m serialsocket encode --type D --seq 1 \
 	  | tee /dev/stderr | $(PY) -m serialsocket decode
 
