@@ -1,31 +1,48 @@
 """serialsocket: a socket-like, reliable, sequenced, full-duplex byte stream over a serial line.
 
-Layer 2 (this release): Kermit packets with CRC-16/KERMIT block checks, the
-prefix encoding that keeps packets printable, and an incremental parser that
-survives any line noise.  All of it is sans-I/O: bytes in, packets and events
-out, no clocks or sockets inside.
+Layer 2, packets: Kermit packets with CRC-16/KERMIT block checks, the prefix
+encoding that keeps packets printable, and an incremental parser that survives
+any line noise.  Layer 3, ARQ: :class:`Endpoint`, a connected, reliable,
+sequenced, full-duplex byte stream with selective-repeat windows and timers
+sized for slow, long-delay lines.  Both are sans-I/O: bytes and ``now`` in,
+bytes, events and timer deadlines out; no clocks or sockets inside.
 """
 
 from ._checks import BlockCheck as BlockCheck
 from ._checks import check_chars as check_chars
 from ._checks import crc16_kermit as crc16_kermit
+from ._config import MAX_WINDOW as MAX_WINDOW
+from ._config import EndpointConfig as EndpointConfig
 from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
 from ._encoding import PRINTABLE as PRINTABLE
 from ._encoding import Encoding as Encoding
+from ._endpoint import Endpoint as Endpoint
+from ._endpoint import EndpointStatistics as EndpointStatistics
 from ._errors import LocalProtocolError as LocalProtocolError
 from ._errors import MalformedDataError as MalformedDataError
 from ._errors import ProtocolError as ProtocolError
 from ._errors import RemoteProtocolError as RemoteProtocolError
+from ._events import Connected as Connected
+from ._events import ConnectionAborted as ConnectionAborted
+from ._events import ConnectionClosed as ConnectionClosed
+from ._events import ConnectionRequested as ConnectionRequested
+from ._events import EndOfStream as EndOfStream
+from ._events import Event as Event
+from ._events import LinkDead as LinkDead
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity
 from ._packet import packet_length as packet_length
+from ._params import PROTOCOL_VERSION as PROTOCOL_VERSION
+from ._params import InitParameters as InitParameters
+from ._params import Negotiated as Negotiated
 from ._parser import PacketParser as PacketParser
 from ._parser import PacketReceived as PacketReceived
 from ._parser import PacketRejected as PacketRejected
 from ._parser import ParserEvent as ParserEvent
 from ._parser import ParserStatistics as ParserStatistics
 from ._parser import RejectReason as RejectReason
+from ._state import State as State
 from ._wire import DEFAULT_MAX_PACKET_LENGTH as DEFAULT_MAX_PACKET_LENGTH
 from ._wire import MAX_PACKET_LENGTH as MAX_PACKET_LENGTH
 from ._wire import MIN_PACKET_LENGTH as MIN_PACKET_LENGTH
@@ -35,12 +52,26 @@ __all__ = [
     "DEFAULT_MAX_PACKET_LENGTH",
     "EIGHT_BIT_CLEAN",
     "MAX_PACKET_LENGTH",
+    "MAX_WINDOW",
     "MIN_PACKET_LENGTH",
     "PRINTABLE",
+    "PROTOCOL_VERSION",
     "BlockCheck",
+    "Connected",
+    "ConnectionAborted",
+    "ConnectionClosed",
+    "ConnectionRequested",
     "Encoding",
+    "EndOfStream",
+    "Endpoint",
+    "EndpointConfig",
+    "EndpointStatistics",
+    "Event",
+    "InitParameters",
+    "LinkDead",
     "LocalProtocolError",
     "MalformedDataError",
+    "Negotiated",
     "Packet",
     "PacketParser",
     "PacketReceived",
@@ -51,6 +82,7 @@ __all__ = [
     "ProtocolError",
     "RejectReason",
     "RemoteProtocolError",
+    "State",
     "build_packet",
     "check_chars",
     "crc16_kermit",

@@ -1,0 +1,153 @@
+"""Endpoint configuration and the timing figures derived from it.
+
+All timing comes from three physical facts the user states -- one-way delay,
+line rate, bits per character -- plus what the endpoint measures.  There is no
+fixed second-scale timeout anywhere: a 2400 bit/s line gets timers sized for
+2400 bit/s, the Earth-Moon path timers sized for 2.6 s round trips, a fast pty
+timers of a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ._checks import BlockCheck
+from ._encoding import PRINTABLE, Encoding
+from ._errors import LocalProtocolError
+from ._packet import data_capacity
+from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, MIN_PACKET_LENGTH
+
+__all__ = ["MAX_WINDOW", "EndpointConfig"]
+
+MAX_WINDOW = 31
+"""Largest window: sequence numbers are mod 64 and selective repeat needs the
+window to be at most half the space (Kermit's 31; E-Kermit P_WSLOTS)."""
+
+_ACK_WIRE = 10
+"""Wire bytes of an ACK (MARK LEN SEQ TYPE + 2 data + 3 CRC + CR)."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EndpointConfig:
+    """What one side of a link wants; the init exchange negotiates the rest.
+
+    Attributes:
+        max_packet_length: largest packet this side receives, MARK through
+            CHECK (default 128, the paper's packet size).  The peer's value
+            bounds what this side sends.
+        window: window in packets, 1..31.  1 is the paper's stop-and-wait.
+        check: block check asked for (CRC-16 by default).
+        encoding: prefix profile; PRINTABLE asks for 8th-bit prefixing so the
+            line carries only printable ASCII plus SOH and CR.
+        one_way_delay: the link's one-way propagation delay in seconds
+            (1.3 for the Earth-Moon path).  Sets the first timeout and the
+            floor under every later one.
+        line_rate: line rate in bits/s, or None when unknown or fast (a TCP
+            tunnel, a local pty).  Sets serialisation time, pacing and the
+            bandwidth-delay bound on the window.
+        bits_per_char: bits per character on the line (8N1 = 10).
+        receive_buffer: bytes of received data held for the application
+            (in order, unread) plus out-of-order packets.  When full, the
+            advertised window closes; nothing is dropped that is not resent.
+        send_buffer: bytes the application may queue beyond what is in flight;
+            ``send`` accepts less when it is full (back-pressure).
+        connect_timeout: give up connecting after this many seconds; None
+            derives it: 10 x the initial timeout.
+        dead_after: declare the link dead after this much silence while
+            data or probes are outstanding; None derives it: 10 x the initial
+            timeout, at least 2 s.
+        max_retries: per-packet retransmissions before aborting; None means
+            unlimited (the right choice for long-delay links: liveness is then
+            judged by ``dead_after``).
+        auto_accept: a listening side accepts connection requests itself; if
+            False it emits ConnectionRequested and waits for accept()/refuse().
+        linger: seconds to keep answering the peer's retransmitted EOF after a
+            graceful close; None derives it: 2 x the current timeout.
+    """
+
+    max_packet_length: int = DEFAULT_MAX_PACKET_LENGTH
+    window: int = 16
+    check: BlockCheck = BlockCheck.CRC16
+    encoding: Encoding = field(default=PRINTABLE)
+    one_way_delay: float = 0.0
+    line_rate: float | None = None
+    bits_per_char: int = 10
+    receive_buffer: int = 64 * 1024
+    send_buffer: int = 64 * 1024
+    connect_timeout: float | None = None
+    dead_after: float | None = None
+    max_retries: int | None = None
+    auto_accept: bool = True
+    linger: float | None = None
+
+    def __post_init__(self) -> None:
+        def bad(name: str, value: object, allowed: str) -> LocalProtocolError:
+            return LocalProtocolError(f"EndpointConfig.{name}={value!r}: must be {allowed}")
+
+        if not MIN_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
+            raise bad(
+                "max_packet_length",
+                self.max_packet_length,
+                f"{MIN_PACKET_LENGTH}..{MAX_PACKET_LENGTH} (MARK through CHECK)",
+            )
+        if not 1 <= self.window <= MAX_WINDOW:
+            raise bad("window", self.window, f"1..{MAX_WINDOW}")
+        if not (math.isfinite(self.one_way_delay) and self.one_way_delay >= 0):
+            raise bad("one_way_delay", self.one_way_delay, "a finite number of seconds >= 0")
+        if self.line_rate is not None and not (
+            math.isfinite(self.line_rate) and self.line_rate > 0
+        ):
+            raise bad("line_rate", self.line_rate, "None or bits/s > 0")
+        if not 5 <= self.bits_per_char <= 16:
+            raise bad("bits_per_char", self.bits_per_char, "5..16 (8N1 = 10)")
+        if self.receive_buffer < 2 * MAX_PACKET_LENGTH:
+            raise bad("receive_buffer", self.receive_buffer, f">= {2 * MAX_PACKET_LENGTH}")
+        if self.send_buffer < 1:
+            raise bad("send_buffer", self.send_buffer, ">= 1")
+        for name in ("connect_timeout", "dead_after", "linger"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise bad(name, value, "None (derived) or seconds > 0")
+        if self.max_retries is not None and self.max_retries < 1:
+            raise bad("max_retries", self.max_retries, "None (unlimited) or >= 1")
+
+    # -- derived timing ------------------------------------------------------------
+
+    def transmit_time(self, wire_bytes: int) -> float:
+        """Seconds the UART needs to clock out this many bytes (0 if the rate is unknown)."""
+        if self.line_rate is None:
+            return 0.0
+        return wire_bytes * self.bits_per_char / self.line_rate
+
+    def physical_rtt(self, packet_bytes: int) -> float:
+        """The least possible round trip for a packet of this size and its ACK.
+
+        No timeout ever shrinks below this (plus a margin): a timer shorter than
+        the physics retransmits packets that are merely still in flight.
+        """
+        return 2 * self.one_way_delay + self.transmit_time(packet_bytes + _ACK_WIRE)
+
+    def initial_timeout(self) -> float:
+        """The retransmission timeout before any round trip has been measured.
+
+        Covers the physical round trip of a full packet, the peer's transmit
+        queue (the ACK may wait behind two of the peer's own packets, see the
+        pacing horizon), and a margin of a quarter of the round trip, at least
+        50 ms for process scheduling on either side.
+        """
+        full = self.max_packet_length + 1
+        base = self.physical_rtt(full) + 2 * self.transmit_time(full)
+        return base + max(0.25 * base, 0.05)
+
+    def derived_connect_timeout(self) -> float:
+        """``connect_timeout`` or its derived default."""
+        return self.connect_timeout or 10 * self.initial_timeout()
+
+    def derived_dead_after(self) -> float:
+        """``dead_after`` or its derived default."""
+        return self.dead_after or max(10 * self.initial_timeout(), 2.0)
+
+    def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
+        """Data characters per packet for a negotiated length and check."""
+        return data_capacity(max_packet_length, check)

@@ -1,0 +1,821 @@
+"""The ARQ endpoint: a sans-I/O reliable, full-duplex byte stream over a lossy line.
+
+Usage (the I/O adapter's loop)::
+
+    ep = Endpoint(config)
+    ep.connect(now)                      # or ep.listen()
+    line.write(ep.data_to_send(now))
+    ...on bytes from the line:   ep.receive_data(chunk, now)
+    ...when now >= ep.get_timer(): ep.handle_timer(now)
+    ...after either:             line.write(ep.data_to_send(now)); handle ep.events()
+    ...application:              ep.send(data, now); ep.read(n, now); ep.send_eof(now)
+
+Output pacing
+-------------
+When the line rate is known, the endpoint models its own UART queue
+(``line_free_at``) and releases data packets only while less than
+``horizon`` seconds of bytes are queued on the line.  Everything else waits
+inside the endpoint, where ACKs and NAKs can overtake it.  Without pacing, a
+2400 bit/s line with a few KB in the tty buffer holds every ACK for seconds
+and timers fire spuriously -- exactly how C-Kermit with 8 x 1000-byte packets
+failed on such a line (issue 3).  Each packet's timer starts when it finishes
+leaving the UART, so queueing never counts as loss.
+
+The effective window is the smallest of the negotiated window, the peer's
+advertised window, and the bandwidth-delay bound: the packets the line can
+carry in one round trip, plus a second round trip as margin for repairing a
+loss, plus two.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from ._checks import BlockCheck
+from ._config import EndpointConfig
+from ._encoding import PRINTABLE, Encoding
+from ._errors import LocalProtocolError, RemoteProtocolError
+from ._events import (
+    Connected,
+    ConnectionAborted,
+    ConnectionClosed,
+    ConnectionRequested,
+    EndOfStream,
+    Event,
+    LinkDead,
+)
+from ._packet import Packet, build_packet, data_capacity
+from ._params import InitParameters, Negotiated, negotiate
+from ._parser import PacketParser, PacketReceived, RejectReason
+from ._receiver import Receiver
+from ._rtt import RttEstimator
+from ._sender import Outstanding, Sender
+from ._state import TERMINAL, State, Trigger, transition
+from ._wire import PacketType, tochar, unchar
+
+__all__ = ["Endpoint", "EndpointStatistics"]
+
+log = logging.getLogger(__name__)
+
+_INIT_MIN_FIELD = 9
+"""An ACK carrying at least this many data characters is an init answer; data
+ACKs carry two or three (next expected, window, optional poll flag)."""
+
+_POLL = ord("P")
+_TIME_EPSILON = 1e-9
+"""Tolerance for comparing computed instants (far below any line's byte time)."""
+_DAMAGE = frozenset(
+    {
+        RejectReason.BAD_CHECK,
+        RejectReason.TRUNCATED,
+        RejectReason.BAD_LENGTH,
+        RejectReason.BAD_HEADER,
+        RejectReason.TOO_LONG,
+    }
+)
+_ERROR_TEXT_MAX = 80
+"""E-packet reasons are cut to this many characters: one normal packet, readable in a trace."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EndpointStatistics:
+    """A snapshot of an endpoint, in the terms an operator console shows.
+
+    Sequence numbers are absolute counts since the connection began (the wire
+    carries them mod 64).  Times are seconds.
+    """
+
+    state: str
+    send_next: int
+    send_base: int
+    receive_expected: int
+    window: int
+    effective_window: int
+    peer_window: int
+    in_flight: int
+    retransmit_queue: int
+    packets_sent: int
+    packets_received: int
+    wire_bytes_sent: int
+    wire_bytes_received: int
+    bytes_queued: int
+    bytes_acknowledged: int
+    bytes_delivered: int
+    bytes_readable: int
+    retransmissions: int
+    timeouts: int
+    fast_retransmits: int
+    naks_sent: int
+    naks_received: int
+    duplicates_received: int
+    out_of_window: int
+    dropped_buffer_full: int
+    ignored_packets: int
+    check_failures: int
+    rejected: int
+    resyncs: int
+    garbage_bytes: int
+    smoothed_rtt: float | None
+    timeout: float
+    line_backlog: float
+
+
+class Endpoint:
+    """One side of a serialsocket link (sans-I/O).
+
+    Args:
+        config: what this side wants; see :class:`EndpointConfig`.
+
+    Every method that can change what goes on the line takes ``now``, a
+    monotonic time in seconds supplied by the caller.  Nothing inside reads a
+    clock, sleeps, or touches a file descriptor.
+    """
+
+    # Per-connection state, (re)initialised by _reset_connection().
+    _negotiated: Negotiated | None
+    _pending_request: Negotiated | None
+    _sender: Sender
+    _receiver: Receiver
+    _control: list[bytes]
+    _events: deque[Event]
+    _send_check: BlockCheck
+    _encoding: Encoding
+    _capacity: int
+    _line_free_at: float | None
+    _clock: float
+    _last_heard: float
+    _last_probe: float
+    _init_deadline: float
+    _connect_deadline: float
+    _linger_until: float
+    _dead_after: float
+    _peer_data_seen: bool
+    _abort_reason: str | None
+    _error_sent_at: float
+    _init_sent_at: float
+    _init_transmissions: int
+
+    def __init__(self, config: EndpointConfig | None = None) -> None:
+        self.config = config or EndpointConfig()
+        cfg = self.config
+        self._mine = InitParameters.mine(
+            max_packet_length=cfg.max_packet_length,
+            window=cfg.window,
+            check=cfg.check,
+            encoding=cfg.encoding,
+            timeout_hint=cfg.initial_timeout(),
+        )
+        self._parser = PacketParser(
+            max_length=cfg.max_packet_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
+        )
+        self._full_wire = cfg.max_packet_length + 1
+        self._rtt = RttEstimator(
+            floor=self._timeout_floor(cfg.max_packet_length, cfg.max_packet_length),
+            ceiling=max(60.0, 8 * cfg.initial_timeout()),
+            initial=cfg.initial_timeout(),
+        )
+        self._counters: dict[str, int] = dict.fromkeys(
+            (
+                "packets_sent",
+                "packets_received",
+                "wire_bytes_sent",
+                "wire_bytes_received",
+                "retransmissions",
+                "timeouts",
+                "fast_retransmits",
+                "naks_sent",
+                "naks_received",
+                "duplicates_received",
+                "out_of_window",
+                "dropped_buffer_full",
+                "ignored_packets",
+            ),
+            0,
+        )
+        self._state: State = State.IDLE
+        self._reset_connection()
+
+    # -- public: lifecycle --------------------------------------------------------
+
+    @property
+    def state(self) -> State:
+        """The connection state (see :mod:`serialsocket._state`)."""
+        return self._state
+
+    @property
+    def parameters(self) -> Negotiated | None:
+        """The negotiated parameters once connected."""
+        return self._negotiated
+
+    def listen(self) -> None:
+        """Wait for a peer's init packet (the manipulator side)."""
+        self._go(Trigger.LISTEN)
+
+    def connect(self, now: float) -> None:
+        """Send an init packet and retransmit it until answered or the deadline passes."""
+        self._go(Trigger.CONNECT)
+        self._connect_deadline = now + self.config.derived_connect_timeout()
+        self._send_init(now)
+
+    def accept(self, now: float) -> None:
+        """Accept the pending connection request (only with ``auto_accept=False``)."""
+        if self._pending_request is None or self._state is not State.LISTEN:
+            raise LocalProtocolError("accept() needs a pending ConnectionRequested in LISTEN")
+        self._establish(self._pending_request, now, answer=True)
+
+    def refuse(self, reason: str, now: float) -> None:
+        """Refuse the pending connection request with a reason; keep listening."""
+        if self._pending_request is None or self._state is not State.LISTEN:
+            raise LocalProtocolError("refuse() needs a pending ConnectionRequested in LISTEN")
+        self._pending_request = None
+        self._queue_error(reason)
+
+    def send(self, data: bytes | bytearray | memoryview, now: float) -> int:
+        """Queue application bytes; returns how many fit in the send buffer.
+
+        Raises:
+            LocalProtocolError: after ``send_eof``/``close``, or once the
+                connection has ended.
+        """
+        if self._state in TERMINAL or self._state is State.LINGER:
+            raise LocalProtocolError(f"cannot send: the connection is {self._state.value}")
+        if self._sender.eof_requested:
+            raise LocalProtocolError("cannot send after send_eof() or close()")
+        return self._sender.queue_data(data)
+
+    def send_eof(self, now: float) -> None:
+        """Half-close: no more data from this side; the peer sees EOF after the last byte."""
+        if self._state in TERMINAL:
+            raise LocalProtocolError(f"cannot send EOF: the connection is {self._state.value}")
+        self._sender.eof_requested = True
+
+    def close(self, now: float) -> None:
+        """Graceful close: send EOF, discard further incoming data, finish when
+        both directions are drained and acknowledged (ConnectionClosed)."""
+        if self._state in TERMINAL or self._state is State.LINGER:
+            return
+        self._sender.eof_requested = True
+        self._receiver.discard = True
+        self._receiver.discarded_total += len(self._receiver.readable)
+        self._receiver.readable.clear()
+        if self._state in (State.IDLE, State.LISTEN):
+            self._go(Trigger.CLOSE)
+
+    def abort(self, reason: str, now: float) -> None:
+        """End the connection at once, telling the peer why (an E packet)."""
+        if self._state in TERMINAL or self._state is State.IDLE:
+            return
+        self._finish_abort(reason, by_peer=False, send=True)
+
+    def reset(self) -> None:
+        """After the connection ended, return to IDLE to listen or connect again.
+
+        Statistics counters keep accumulating across connections.
+        """
+        self._go(Trigger.RESET)
+        self._reset_connection()
+
+    # -- public: data -------------------------------------------------------------
+
+    def read(self, max_bytes: int | None = None, now: float | None = None) -> bytes:
+        """Take received bytes (in order, each exactly once).
+
+        Returns b"" when nothing is readable; check :attr:`at_eof` to tell EOF
+        from "nothing yet".  Reading may reopen the advertised window; pass
+        ``now`` so the window update can be sent at once.
+        """
+        out = self._receiver.read(max_bytes)
+        if out and self._state is State.ESTABLISHED:
+            grown = self._receiver.window_to_advertise() - self._receiver.advertised
+            if grown >= max(1, self._receiver.window // 4) or (
+                self._receiver.advertised == 0 and grown > 0
+            ):
+                self._queue_ack(self._receiver.last_in_order())
+        return out
+
+    @property
+    def readable(self) -> int:
+        """Bytes :meth:`read` would return now."""
+        return len(self._receiver.readable)
+
+    @property
+    def at_eof(self) -> bool:
+        """The peer's EOF has been delivered and every byte before it read."""
+        return self._receiver.eof and not self._receiver.readable
+
+    @property
+    def send_buffer_free(self) -> int:
+        """Bytes :meth:`send` would accept now."""
+        return self._sender.free()
+
+    @property
+    def all_acknowledged(self) -> bool:
+        """Everything queued so far has been sent and acknowledged."""
+        s = self._sender
+        return not s.queue and s.base == s.next
+
+    # -- public: the I/O side ---------------------------------------------------------
+
+    def receive_data(self, data: bytes | bytearray | memoryview, now: float) -> None:
+        """Feed bytes read from the line."""
+        self._counters["wire_bytes_received"] += len(data)
+        self._parser.receive_data(data)
+        while (event := self._parser.next_event()) is not None:
+            if isinstance(event, PacketReceived):
+                self._counters["packets_received"] += 1
+                self._last_heard = now
+                try:
+                    self._on_packet(event.packet, now)
+                except RemoteProtocolError as exc:
+                    log.warning("protocol error from peer: %s", exc)
+                    self._finish_abort(exc.error_hint, by_peer=False, send=True)
+            elif event.reason in _DAMAGE and self._state is State.ESTABLISHED:
+                nak = self._receiver.gap_to_nak(now, self._rtt.timeout())
+                if nak is not None:
+                    self._queue_nak(nak)
+            if self._state in TERMINAL and self._state is not State.FAILED:
+                break
+
+    def data_to_send(self, now: float) -> bytes:
+        """Bytes to write to the line now (control first, then paced data)."""
+        out: list[bytes] = []
+        for wire in self._control:
+            out.append(wire)
+            self._account(wire, now)
+        self._control.clear()
+        if self._state is State.ESTABLISHED and self._negotiated is not None:
+            self._release_data(now, out)
+        return b"".join(out)
+
+    def get_timer(self) -> float | None:
+        """When :meth:`handle_timer` must next be called, or None."""
+        st = self._state
+        if st is State.CONNECTING:
+            return min(self._init_deadline, self._connect_deadline)
+        if st is State.LINGER:
+            return self._linger_until
+        if st is not State.ESTABLISHED:
+            return None
+        times = [self._last_heard + self._dead_after]
+        deadline = self._sender.next_deadline()
+        if deadline is not None:
+            times.append(deadline)
+        wake = self._pacing_wake()
+        if wake is not None:
+            times.append(wake)
+        times.append(self._next_probe_time())
+        return min(times)
+
+    def handle_timer(self, now: float) -> None:
+        """Run whatever timers are due at ``now`` (safe to call early)."""
+        st = self._state
+        if st is State.CONNECTING:
+            if now >= self._connect_deadline:
+                self._go(Trigger.CONNECT_TIMEOUT)
+                self._events.append(
+                    ConnectionAborted(
+                        reason=(
+                            "no answer to connect within "
+                            f"{self.config.derived_connect_timeout():.1f} s"
+                        ),
+                        by_peer=False,
+                    )
+                )
+            elif now >= self._init_deadline:
+                self._rtt.on_timeout()
+                self._counters["timeouts"] += 1
+                self._send_init(now)
+            return
+        if st is State.LINGER:
+            if now >= self._linger_until:
+                self._go(Trigger.LINGER_EXPIRED)
+            return
+        if st is not State.ESTABLISHED:
+            return
+        silence = now - self._last_heard
+        if silence >= self._dead_after:
+            self._declare_dead(silence)
+            return
+        expired = self._sender.expired(now)
+        if expired:
+            self._counters["timeouts"] += 1
+            self._rtt.on_timeout()
+            limit = self.config.max_retries
+            for seq in expired:
+                pkt = self._sender.outstanding[seq]
+                if limit is not None and pkt.transmissions > limit:
+                    self._finish_abort(
+                        f"Too many retries (packet {seq % 64})", by_peer=False, send=True
+                    )
+                    return
+                self._sender.schedule(seq)
+        if now >= self._next_probe_time():
+            self._last_probe = now
+            self._queue_ack(self._receiver.last_in_order(), poll=True)
+
+    def events(self) -> list[Event]:
+        """Take all pending events."""
+        out = list(self._events)
+        self._events.clear()
+        return out
+
+    def next_event(self) -> Event | None:
+        """Take the next pending event, or None."""
+        return self._events.popleft() if self._events else None
+
+    def statistics(self) -> EndpointStatistics:
+        """A snapshot of counters, sequence variables and timers."""
+        s, r, c = self._sender, self._receiver, self._counters
+        ps = self._parser.statistics()
+        return EndpointStatistics(
+            state=self._state.value,
+            send_next=s.next,
+            send_base=s.base,
+            receive_expected=r.expected,
+            window=s.window,
+            effective_window=self._effective_window(),
+            peer_window=s.peer_window,
+            in_flight=s.in_flight(),
+            retransmit_queue=len(s.retransmit),
+            packets_sent=c["packets_sent"],
+            packets_received=c["packets_received"],
+            wire_bytes_sent=c["wire_bytes_sent"],
+            wire_bytes_received=c["wire_bytes_received"],
+            bytes_queued=len(s.queue),
+            bytes_acknowledged=s.bytes_acked,
+            bytes_delivered=r.delivered_total,
+            bytes_readable=len(r.readable),
+            retransmissions=c["retransmissions"],
+            timeouts=c["timeouts"],
+            fast_retransmits=c["fast_retransmits"],
+            naks_sent=c["naks_sent"],
+            naks_received=c["naks_received"],
+            duplicates_received=c["duplicates_received"],
+            out_of_window=c["out_of_window"],
+            dropped_buffer_full=c["dropped_buffer_full"],
+            ignored_packets=c["ignored_packets"],
+            check_failures=ps.rejected.get(RejectReason.BAD_CHECK.value, 0),
+            rejected=sum(ps.rejected.values()),
+            resyncs=ps.resyncs,
+            garbage_bytes=ps.garbage_bytes,
+            smoothed_rtt=self._rtt.srtt,
+            timeout=self._rtt.timeout(),
+            line_backlog=0.0
+            if self._line_free_at is None
+            else max(self._line_free_at - self._clock, 0.0),
+        )
+
+    # -- internals: connection ------------------------------------------------------
+
+    def _reset_connection(self) -> None:
+        cfg = self.config
+        self._negotiated = None
+        self._pending_request = None
+        self._sender = Sender(send_buffer=cfg.send_buffer)
+        self._receiver = Receiver(
+            receive_buffer=cfg.receive_buffer,
+            window=cfg.window,
+            capacity=data_capacity(cfg.max_packet_length, cfg.check),
+        )
+        self._control = []
+        self._events = deque()
+        self._parser.reset()
+        self._parser.check = BlockCheck.CRC16
+        self._parser.max_length = cfg.max_packet_length
+        self._send_check = BlockCheck.CRC16
+        self._encoding = PRINTABLE
+        self._capacity = 0
+        self._line_free_at = None
+        self._clock = 0.0
+        self._last_heard = 0.0
+        self._last_probe = -math.inf
+        self._init_deadline = math.inf
+        self._connect_deadline = math.inf
+        self._linger_until = math.inf
+        self._dead_after = cfg.derived_dead_after()
+        self._peer_data_seen = False
+        self._abort_reason = None
+        self._error_sent_at = -math.inf
+        self._init_sent_at = 0.0
+        self._init_transmissions = 0
+
+    def _go(self, trigger: Trigger) -> None:
+        old = self._state
+        self._state = transition(old, trigger)
+        log.debug("state %s -> %s (%s)", old.value, self._state.value, trigger.value)
+
+    def _send_init(self, now: float) -> None:
+        init = Packet(seq=0, type=PacketType.INIT, data=self._mine.encode())
+        self._control.append(build_packet(init, BlockCheck.CRC16))
+        self._init_sent_at = now
+        self._init_transmissions += 1
+        self._init_deadline = now + self._rtt.timeout()
+
+    def _on_init(self, packet: Packet, now: float) -> None:
+        st = self._state
+        if st is State.ESTABLISHED:
+            if self._peer_data_seen:
+                self._finish_abort(
+                    "peer restarted: new connection request on a live link",
+                    by_peer=True,
+                    send=False,
+                )
+            else:
+                self._answer_init()  # Our answer was lost; say it again.
+            return
+        if st not in (State.LISTEN, State.CONNECTING):
+            return
+        try:
+            theirs = InitParameters.decode(packet.data)
+            agreed = negotiate(self._mine, theirs)
+        except RemoteProtocolError as exc:
+            log.info("refusing connection: %s", exc)
+            self._queue_error(exc.error_hint)
+            if st is State.CONNECTING:
+                self._finish_abort(exc.error_hint, by_peer=False, send=False)
+            return
+        if st is State.LISTEN and not self.config.auto_accept:
+            if self._pending_request is None:
+                self._pending_request = agreed
+                self._events.append(ConnectionRequested(parameters=agreed))
+            return
+        self._establish(agreed, now, answer=True)
+
+    def _on_init_answer(self, packet: Packet, now: float) -> None:
+        if self._state is not State.CONNECTING:
+            return
+        try:
+            agreed = negotiate(self._mine, InitParameters.decode(packet.data))
+        except RemoteProtocolError as exc:
+            self._finish_abort(exc.error_hint, by_peer=False, send=True)
+            return
+        if self._init_transmissions == 1:
+            # The init went out once: its answer is a valid RTT sample (Karn).
+            self._rtt.sample(now - self._init_sent_at)
+        self._establish(agreed, now, answer=False)
+
+    def _establish(self, agreed: Negotiated, now: float, *, answer: bool) -> None:
+        self._negotiated = agreed
+        self._pending_request = None
+        self._go(
+            Trigger.INIT_ACKED
+            if self._state is State.CONNECTING and not answer
+            else Trigger.INIT_RECEIVED
+        )
+        self._send_check = agreed.check
+        self._parser.check = agreed.check
+        self._encoding = agreed.encoding
+        self._capacity = data_capacity(agreed.send_max_length, agreed.check)
+        self._sender.window = agreed.window
+        self._sender.peer_window = agreed.window
+        self._receiver.window = agreed.window
+        self._receiver.capacity = data_capacity(agreed.receive_max_length, agreed.check)
+        self._full_wire = agreed.send_max_length + 1
+        self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
+        self._last_heard = now
+        self._init_deadline = math.inf
+        if answer:
+            self._answer_init()
+        self._events.append(Connected(parameters=agreed))
+
+    def _answer_init(self) -> None:
+        self._control.append(
+            build_packet(
+                Packet(seq=0, type=PacketType.ACK, data=self._mine.encode()), BlockCheck.CRC16
+            )
+        )
+
+    def _queue_error(self, reason: str) -> None:
+        text = PRINTABLE.encode(reason.encode("utf-8", "replace")[:_ERROR_TEXT_MAX])
+        self._control.append(
+            build_packet(Packet(seq=0, type=PacketType.ERROR, data=text), self._send_check)
+        )
+
+    def _finish_abort(self, reason: str, *, by_peer: bool, send: bool) -> None:
+        established = self._state in (State.ESTABLISHED, State.LINGER)
+        if send:
+            self._queue_error(reason)
+            self._abort_reason = reason
+            self._error_sent_at = self._clock
+        self._go(Trigger.REFUSED if self._state is State.CONNECTING else Trigger.ABORT)
+        self._events.append(
+            ConnectionAborted(reason=reason, by_peer=by_peer, refused=not established and by_peer)
+        )
+
+    def _declare_dead(self, silence: float) -> None:
+        s = self._sender
+        self._events.append(
+            LinkDead(
+                silence=silence,
+                bytes_acknowledged=s.bytes_acked,
+                bytes_in_flight=s.bytes_in_flight,
+                bytes_unsent=s.unsent_bytes(),
+            )
+        )
+        self._go(Trigger.LINK_DEAD)
+
+    # -- internals: packets in ------------------------------------------------------
+
+    def _on_packet(self, packet: Packet, now: float) -> None:
+        ptype = packet.type
+        if self._state is State.FAILED:
+            if (
+                ptype != PacketType.ERROR
+                and self._abort_reason is not None
+                and now - self._error_sent_at >= self._rtt.timeout()
+            ):
+                # The peer still talks: our E was lost.  Repeat it, once per timeout.
+                self._error_sent_at = now
+                self._queue_error(self._abort_reason)
+            return
+        if ptype == PacketType.INIT:
+            self._on_init(packet, now)
+        elif ptype == PacketType.ERROR:
+            if self._state in (State.CONNECTING, State.ESTABLISHED, State.LINGER):
+                reason = self._safe_text(packet.data)
+                self._finish_abort(reason, by_peer=True, send=False)
+        elif ptype == PacketType.ACK:
+            if len(packet.data) >= _INIT_MIN_FIELD:
+                self._on_init_answer(packet, now)
+            elif self._state in (State.ESTABLISHED, State.LINGER):
+                self._on_ack(packet, now)
+        elif ptype == PacketType.NAK:
+            if self._state is State.ESTABLISHED:
+                self._counters["naks_received"] += 1
+                self._sender.on_nak(packet.seq, now, self._min_rtt())
+        elif ptype in (PacketType.DATA, PacketType.EOF):
+            if self._state in (State.ESTABLISHED, State.LINGER):
+                self._on_data(packet, now)
+        else:
+            self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
+
+    def _on_ack(self, packet: Packet, now: float) -> None:
+        data = packet.data
+        cum = unchar(data[0]) % 64 if len(data) >= 1 else None
+        window = min(max(unchar(data[1]), 0), 31) if len(data) >= 2 else None
+        before = set(self._sender.retransmit)
+        for rtt in self._sender.on_ack(packet.seq, cum, window, now):
+            self._rtt.sample(rtt)
+        if set(self._sender.retransmit) - before:
+            self._counters["fast_retransmits"] += 1
+        if len(data) >= 3 and data[2] == _POLL:
+            self._queue_ack(self._receiver.last_in_order())
+        self._check_closed(now)
+
+    def _on_data(self, packet: Packet, now: float) -> None:
+        self._peer_data_seen = True
+        eof = packet.type == PacketType.EOF
+        arrival = self._receiver.on_packet(packet.seq, packet.data, eof, now, self._rtt.timeout())
+        kind = arrival.classification
+        if kind in ("old", "duplicate"):
+            self._counters["duplicates_received"] += 1
+        elif kind == "outside":
+            self._counters["out_of_window"] += 1
+        elif kind == "full":
+            self._counters["dropped_buffer_full"] += 1
+        self._receiver.take_fields(arrival, self._encoding)
+        if arrival.ack is not None:
+            self._queue_ack(arrival.ack)
+        if arrival.nak is not None:
+            self._queue_nak(arrival.nak)
+        if arrival.eof:
+            self._events.append(EndOfStream())
+        self._check_closed(now)
+
+    def _check_closed(self, now: float) -> None:
+        if self._state is State.ESTABLISHED and self._sender.eof_acked and self._receiver.eof:
+            self._go(Trigger.BOTH_CLOSED)
+            self._linger_until = now + (self.config.linger or 2 * self._rtt.timeout())
+            self._events.append(ConnectionClosed())
+
+    @staticmethod
+    def _safe_text(data: bytes) -> str:
+        try:
+            raw = PRINTABLE.decode(data)
+        except RemoteProtocolError:
+            raw = data
+        return raw.decode("utf-8", "replace")[:_ERROR_TEXT_MAX] or "peer aborted"
+
+    # -- internals: packets out -----------------------------------------------------
+
+    def _queue_ack(self, seq_mod: int, *, poll: bool = False) -> None:
+        window = self._receiver.window_to_advertise()
+        self._receiver.advertised = window
+        data = bytes((tochar(self._receiver.expected % 64), tochar(window)))
+        if poll:
+            data += b"P"
+        self._control.append(
+            build_packet(Packet(seq=seq_mod, type=PacketType.ACK, data=data), self._send_check)
+        )
+
+    def _queue_nak(self, seq_mod: int) -> None:
+        self._counters["naks_sent"] += 1
+        self._control.append(
+            build_packet(Packet(seq=seq_mod, type=PacketType.NAK), self._send_check)
+        )
+
+    def _account(self, wire: bytes, now: float) -> float:
+        """Count a packet handed to the line; returns when it finishes leaving the UART."""
+        self._counters["packets_sent"] += 1
+        self._counters["wire_bytes_sent"] += len(wire)
+        self._clock = max(self._clock, now)
+        start = now if self._line_free_at is None else max(now, self._line_free_at)
+        self._line_free_at = start + self.config.transmit_time(len(wire))
+        return self._line_free_at
+
+    def _horizon(self) -> float:
+        """Seconds of bytes allowed queued in the UART before data waits here."""
+        return 2 * self.config.transmit_time(self._full_wire)
+
+    def _line_has_room(self, now: float) -> bool:
+        if self.config.line_rate is None or self._line_free_at is None:
+            return True
+        # The same expression as _pacing_wake, so waking at that time always
+        # finds room (a float-rounding mismatch here would spin forever).
+        return now >= self._line_free_at - self._horizon() - _TIME_EPSILON
+
+    def _pacing_wake(self) -> float | None:
+        s = self._sender
+        wants = bool(s.retransmit) or (s.has_new_data() and s.room(self._effective_window()) > 0)
+        if not wants:
+            return None
+        if self.config.line_rate is None or self._line_free_at is None:
+            return self._clock
+        return self._line_free_at - self._horizon()
+
+    def _release_data(self, now: float, out: list[bytes]) -> None:
+        s = self._sender
+        timeout = self._rtt.timeout()
+        while s.retransmit and self._line_has_room(now):
+            pkt = s.outstanding[s.retransmit.popleft()]
+            self._counters["retransmissions"] += 1
+            self._transmit(pkt, now, timeout, out)
+        if s.retransmit:
+            return
+        while self._line_has_room(now):
+            room = s.room(self._effective_window())
+            if room <= 0 or not s.has_new_data():
+                return
+            if s.queue:
+                batch = room
+                if self.config.line_rate is not None and self._line_free_at is not None:
+                    spare = self._horizon() - max(self._line_free_at - now, 0.0)
+                    batch = max(
+                        1,
+                        min(
+                            room,
+                            math.ceil(
+                                spare / max(self.config.transmit_time(self._full_wire), 1e-9)
+                            ),
+                        ),
+                    )
+                for field, used in self._encoding.encode_fields(s.queue, self._capacity, batch):
+                    wire = build_packet(
+                        Packet(seq=s.next % 64, type=PacketType.DATA, data=field), self._send_check
+                    )
+                    del s.queue[:used]
+                    self._transmit(s.add(wire, used, eof=False), now, timeout, out)
+            else:
+                wire = build_packet(Packet(seq=s.next % 64, type=PacketType.EOF), self._send_check)
+                self._transmit(s.add(wire, 0, eof=True), now, timeout, out)
+
+    def _transmit(self, pkt: Outstanding, now: float, timeout: float, out: list[bytes]) -> None:
+        out.append(pkt.wire)
+        pkt.transmissions += 1
+        pkt.done_at = self._account(pkt.wire, now)
+        pkt.deadline = pkt.done_at + timeout
+
+    # -- internals: timing --------------------------------------------------------------
+
+    def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
+        """Physical round trip of our full packet, plus the peer's pacing queue
+        (two of its packets, which are at most our receive limit), plus 10 %."""
+        cfg = self.config
+        rtt = cfg.physical_rtt(send_max_length + 1)
+        return 1.1 * (rtt + 2 * cfg.transmit_time(receive_max_length + 1)) + 0.005
+
+    def _min_rtt(self) -> float:
+        return self.config.physical_rtt(self._full_wire)
+
+    def _effective_window(self) -> int:
+        window = self._sender.window
+        tx = self.config.transmit_time(self._full_wire)
+        if tx <= 0:
+            return window
+        rtt = self._rtt.srtt if self._rtt.srtt is not None else self._min_rtt()
+        # One round trip of packets keeps the line busy; a second round trip of
+        # margin lets a loss be NAKed and repaired (one more round trip) without
+        # the window stalling.  Pacing keeps the UART queue at two packets, so
+        # these packets are on the line, not piling up in a tty buffer.
+        bdp = math.ceil(2 * max(rtt, self._min_rtt()) / tx) + 2
+        return max(1, min(window, bdp))
+
+    def _next_probe_time(self) -> float:
+        """Probe when the peer has been quiet for a quarter of ``dead_after``."""
+        interval = self._dead_after / 4
+        if self._sender.in_flight():
+            return math.inf  # Retransmissions already probe.
+        return max(self._last_heard, self._last_probe) + interval

@@ -1,0 +1,278 @@
+"""The init exchange: each side's parameters and their negotiation.
+
+The init packet (``I``, seq 0) and its acceptance (``Y``, seq 0) carry the same
+Kermit Send-Init layout (reference/kermit.md section 4), so a Kermit tracer
+reads them; telelink adds its own fields after SYSID.  Every field says what
+*I* want *you* to do when sending to me:
+
+====  =========  ==========================================================
+ #    field      telelink's value
+====  =========  ==========================================================
+ 1    MAXL       tochar(min(94, max_packet_length - 2)): longest normal LEN
+ 2    TIME       tochar(timeout hint in s, clamped to 0..94)
+ 3    NPAD       tochar(0)
+ 4    PADC       ctl(NUL) = ``@``
+ 5    EOL        tochar(CR) = ``-``
+ 6    QCTL       ``#``
+ 7    QBIN       ``&`` (printable profile: I want 8th-bit prefixing) or ``Y``
+ 8    CHKT       ``5`` for CRC-16 on every packet (FORCE-3), else ``1``/``2``
+ 9    REPT       ``~`` or space (no repeat counts)
+ 10   CAPAS      tochar(2 | 4): long packets, sliding windows
+ 11   WINDO      tochar(window)
+ 12   MAXLX1/2   tochar(n // 95), tochar(n % 95), n = max_packet_length - 7
+ 14   CHKPNT     ``0``
+ 15   CHKINT     ``___``
+ 18   WHATAMI    tochar(32): field valid, no flags
+ 19   SYSID      ``"TL`` (length 2, "TL" = telelink)
+ 20   WHATAMI2   tochar(32)
+ 21   VERSION    tochar(protocol version)
+ 22   TIMEOUT    three base-95 chars: the initial timeout hint in milliseconds
+====  =========  ==========================================================
+
+MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
+through CHECK, so n = length - 7 exactly, with no hidden safety margin.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ._checks import BlockCheck
+from ._encoding import Encoding
+from ._errors import RemoteProtocolError
+from ._wire import MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
+
+__all__ = ["PROTOCOL_VERSION", "InitParameters", "Negotiated", "negotiate"]
+
+PROTOCOL_VERSION = 1
+"""Bumped on any incompatible change to the wire protocol in PROTOCOL.md."""
+
+_CAP_MORE, _CAP_LONG, _CAP_WINDOWS = 1, 2, 4
+_SYSID = b"TL"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class InitParameters:
+    """One side's init fields, decoded.
+
+    Attributes:
+        max_packet_length: longest packet I receive, MARK through CHECK.
+        window: window slots I offer, 1..31.
+        check: block check I ask for (CHKT ``5`` decodes as CRC16 + force).
+        force_check: True when CHKT was ``5`` (CRC on the init packets too).
+        qbin: ``&``-style prefix I want, ``Y`` (I agree if you want one) or ``N``.
+        rept: repeat prefix I propose, or None.
+        qctl: the control prefix I will use.
+        timeout_hint: my initial timeout in seconds (telelink field; None from
+            other Kermits).
+        version: telelink protocol version, or None for a non-telelink peer.
+    """
+
+    max_packet_length: int
+    window: int
+    check: BlockCheck
+    force_check: bool
+    qbin: int
+    rept: int | None
+    qctl: int = ord("#")
+    timeout_hint: float | None = None
+    version: int | None = PROTOCOL_VERSION
+
+    @classmethod
+    def mine(
+        cls,
+        *,
+        max_packet_length: int,
+        window: int,
+        check: BlockCheck,
+        encoding: Encoding,
+        timeout_hint: float,
+    ) -> InitParameters:
+        """The parameters an endpoint with this configuration offers."""
+        return cls(
+            max_packet_length=max_packet_length,
+            window=window,
+            check=check,
+            force_check=check is BlockCheck.CRC16,
+            qbin=encoding.qbin if encoding.qbin is not None else ord("Y"),
+            rept=encoding.rept,
+            qctl=encoding.qctl,
+            timeout_hint=timeout_hint,
+        )
+
+    def encode(self) -> bytes:
+        """The init data field (all printable, no prefixing needed)."""
+        n = self.max_packet_length - 7
+        ms = min(max(round((self.timeout_hint or 0.0) * 1000), 0), 95**3 - 1)
+        fields = [
+            tochar(min(94, self.max_packet_length - 2)),
+            tochar(min(94, max(0, round(self.timeout_hint or 0)))),
+            tochar(0),
+            ctl(0),
+            tochar(13),
+            self.qctl,
+            self.qbin,
+            ord("5") if self.force_check else ord(str(int(self.check))),
+            self.rept if self.rept is not None else 32,
+            tochar(_CAP_LONG | _CAP_WINDOWS),
+            tochar(self.window),
+            tochar(n // 95),
+            tochar(n % 95),
+            ord("0"),
+            *b"___",
+            tochar(32),
+            tochar(len(_SYSID)),
+            *_SYSID,
+            tochar(32),
+            tochar(self.version or 0),
+            tochar(ms // 9025),
+            tochar(ms // 95 % 95),
+            tochar(ms % 95),
+        ]
+        return bytes(fields)
+
+    @classmethod
+    def decode(cls, data: bytes) -> InitParameters:
+        """Parse a peer's init field; missing trailing fields take Kermit defaults.
+
+        Raises:
+            RemoteProtocolError: a field is out of its legal range.
+        """
+
+        def at(i: int, default: int) -> int:
+            return data[i] if i < len(data) else default
+
+        def bad(what: str) -> RemoteProtocolError:
+            return RemoteProtocolError(
+                f"init packet: bad {what} in {data!r}", error_hint=f"Bad init field: {what}"
+            )
+
+        maxl = unchar(at(0, tochar(80)))
+        if maxl < 10:
+            maxl = 80  # Kermit treats MAXL < 10 as the default (ckcfns.c spar).
+        if maxl > 94:
+            raise bad("MAXL")
+        qctl = at(5, ord("#"))
+        qbin = at(6, ord("N"))
+        chkt = at(7, ord("1"))
+        if chkt not in b"1235":
+            raise bad("CHKT")
+        rept_c = at(8, 32)
+        rept = rept_c if (33 <= rept_c <= 62 or 96 <= rept_c <= 126) else None
+        i = 9
+        caps = 0
+        shift = 0
+        while i < len(data):
+            c = unchar(data[i])
+            if not 0 <= c <= 94:
+                raise bad("CAPAS")
+            if shift == 0:
+                caps = c
+            i += 1
+            shift += 1
+            if not c & _CAP_MORE:
+                break
+        window = unchar(at(i, tochar(1))) if caps & _CAP_WINDOWS else 1
+        if not 1 <= window <= 32:
+            raise bad("WINDO")
+        window = min(window, 31)
+        max_len = maxl + 2
+        if caps & _CAP_LONG and i + 2 < len(data):
+            n = unchar(data[i + 1]) * 95 + unchar(data[i + 2])
+            if n < 0:
+                raise bad("MAXLX")
+            max_len = min(max(n + 7, MIN_PACKET_LENGTH), MAX_PACKET_LENGTH)
+        j = i + 3 + 1 + 3 + 1  # CHKPNT, CHKINT, WHATAMI
+        version = None
+        timeout_hint = None
+        if j < len(data):
+            sysid_len = unchar(data[j])
+            sysid = data[j + 1 : j + 1 + sysid_len]
+            k = j + 1 + max(sysid_len, 0) + 1  # skip WHATAMI2
+            if sysid == _SYSID and k + 3 < len(data):
+                version = unchar(data[k])
+                a, b, c = (unchar(x) for x in data[k + 1 : k + 4])
+                if min(a, b, c) < 0 or max(a, b, c) > 94:
+                    raise bad("TIMEOUT")
+                timeout_hint = (a * 9025 + b * 95 + c) / 1000
+        return cls(
+            max_packet_length=max(max_len, MIN_PACKET_LENGTH),
+            window=window,
+            check=BlockCheck(3 if chkt == ord("5") else chkt - ord("0")),
+            force_check=chkt == ord("5"),
+            qbin=qbin,
+            rept=rept,
+            qctl=qctl,
+            timeout_hint=timeout_hint,
+            version=version,
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Negotiated:
+    """What both sides use after the init exchange.
+
+    Attributes:
+        send_max_length: largest packet we send (the peer's receive limit).
+        receive_max_length: largest packet we accept (ours).
+        window: the smaller of the two offers.
+        check: block check on every packet after the exchange.
+        encoding: the prefix profile both directions use.
+        peer: the peer's parameters as received.
+    """
+
+    send_max_length: int
+    receive_max_length: int
+    window: int
+    check: BlockCheck
+    encoding: Encoding
+    peer: InitParameters
+
+
+def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
+    """Combine two offers (the same answer on both sides).
+
+    Raises:
+        RemoteProtocolError: the offers cannot work together: a different
+            protocol version, or one side needs 8th-bit prefixing (a 7-bit
+            printable line) and the other refuses it.  ``error_hint`` is the
+            reason to send in the refusal.
+    """
+    if theirs.version != PROTOCOL_VERSION:
+        got = "none (not a telelink endpoint)" if theirs.version is None else str(theirs.version)
+        raise RemoteProtocolError(
+            f"peer speaks protocol version {got}, this endpoint speaks {PROTOCOL_VERSION}",
+            error_hint=f"Protocol version {got} not supported (want {PROTOCOL_VERSION})",
+        )
+    check: BlockCheck
+    if mine.check == theirs.check and mine.check in (BlockCheck.SUM12, BlockCheck.CRC16):
+        check = mine.check
+    else:
+        check = BlockCheck.SUM6  # Kermit: both must ask for the same type, else type 1.
+    wants = {c for c in (mine.qbin, theirs.qbin) if c not in (ord("Y"), ord("N"))}
+    if len(wants) > 1:
+        raise RemoteProtocolError(
+            "the two sides ask for different 8th-bit prefixes",
+            error_hint="Conflicting 8th-bit prefixes",
+        )
+    qbin = next(iter(wants), None)
+    if qbin is not None and ord("N") in (mine.qbin, theirs.qbin):
+        raise RemoteProtocolError(
+            "8th-bit prefixing is required (7-bit printable line) but refused",
+            error_hint="8th-bit prefixing refused: a 7-bit line cannot carry the data",
+        )
+    rept = mine.rept if mine.rept is not None and mine.rept == theirs.rept else None
+    if mine.qctl != theirs.qctl:
+        raise RemoteProtocolError(
+            "the two sides use different control prefixes",
+            error_hint="Control prefix mismatch",
+        )
+    encoding = Encoding(qctl=mine.qctl, qbin=qbin, rept=rept)
+    return Negotiated(
+        send_max_length=theirs.max_packet_length,
+        receive_max_length=mine.max_packet_length,
+        window=min(mine.window, theirs.window),
+        check=check,
+        encoding=encoding,
+        peer=theirs,
+    )

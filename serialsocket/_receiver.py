@@ -1,0 +1,192 @@
+"""The receiving half of an endpoint: reorder buffer, delivery, NAKs, flow control.
+
+Theory of operation
+-------------------
+``expected`` is the lowest sequence number not yet received.  A packet with
+wire number ``s`` is classified against it (C-Kermit's chkwin, ckcfn3.c):
+
+* ``(s - expected) mod 64 < window``: in the current window.  Buffered
+  (once: a duplicate is only re-acknowledged) and acknowledged.
+* ``(s - expected) mod 64 >= 64 - window``: the previous window, an old
+  duplicate whose ACK was lost.  Re-acknowledged, never delivered again.
+* anything else: impossible for a correct peer; counted and ignored.
+
+Packets are delivered in order as soon as ``expected`` is present, so every
+byte is delivered exactly once.  Consecutive fields are decoded together:
+tokens never span packets, so decoding the concatenation is exact and lets the
+vectorised decoder work on large inputs.
+
+NAK policy (C-Kermit's selective repeat): when a packet arrives beyond a gap,
+NAK the oldest missing packet not NAKed within the last timeout; when a
+damaged packet arrives, do the same, or NAK ``expected`` if nothing is missing.
+
+Flow control: the bytes held (delivered but unread, plus buffered out-of-order
+fields) are bounded by ``receive_buffer``.  The advertised window shrinks with
+free space; a packet that does not fit is dropped *unacknowledged* (the sender
+still holds it and resends it), so a slow reader closes the window instead of
+losing data.  An EOF marker needs no space and is always accepted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ._encoding import Encoding
+
+__all__ = ["Arrival", "Receiver"]
+
+
+@dataclass(slots=True)
+class Arrival:
+    """What the endpoint must do after a data or EOF packet arrived.
+
+    Attributes:
+        ack: sequence number (mod 64) to acknowledge, or None.
+        nak: sequence number (mod 64) to NAK, or None.
+        delivered: bytes newly readable.
+        eof: the peer's EOF was delivered by this arrival.
+        classification: ``new``, ``duplicate``, ``old``, ``outside`` or ``full``.
+    """
+
+    ack: int | None = None
+    nak: int | None = None
+    delivered: int = 0
+    eof: bool = False
+    classification: str = "new"
+    fields: list[bytes] = field(default_factory=list)
+
+
+_EOF = None
+
+
+class Receiver:
+    """Receive-side bookkeeping."""
+
+    def __init__(self, *, receive_buffer: int, window: int, capacity: int) -> None:
+        self.receive_buffer = receive_buffer
+        self.window = window
+        self.capacity = capacity
+        self.expected = 1
+        self.buffered: dict[int, bytes | None] = {}
+        self.buffered_bytes = 0
+        self.readable = bytearray()
+        self.naked: dict[int, float] = {}
+        self.eof = False
+        self.discard = False
+        self.delivered_total = 0
+        self.discarded_total = 0
+        self.advertised = 0
+
+    # -- classification ------------------------------------------------------------
+
+    def _resolve(self, seq_mod: int) -> tuple[str, int]:
+        offset = (seq_mod - self.expected) % 64
+        if offset < self.window:
+            return "new", self.expected + offset
+        if offset >= 64 - self.window:
+            return "old", self.expected - (64 - offset)
+        return "outside", -1
+
+    def on_packet(
+        self, seq_mod: int, field: bytes, eof: bool, now: float, nak_after: float
+    ) -> Arrival:
+        """Handle a verified data (``eof=False``) or EOF packet.
+
+        Args:
+            seq_mod: its wire sequence number.
+            field: its encoded data field.
+            eof: True for the EOF (Z) packet.
+            now: arrival time.
+            nak_after: do not NAK the same packet again within this many seconds.
+        """
+        kind, seq = self._resolve(seq_mod)
+        if kind == "old":
+            return Arrival(ack=seq_mod, classification="old")
+        if kind == "outside" or (self.eof and seq >= self.expected):
+            return Arrival(classification="outside")
+        if seq in self.buffered:
+            return Arrival(ack=seq_mod, classification="duplicate")
+        if not eof and not self.discard and len(field) > self.free():
+            return Arrival(classification="full")
+        self.buffered[seq] = _EOF if eof else field
+        if not eof:
+            self.buffered_bytes += len(field)
+        self.naked.pop(seq, None)
+        arrival = Arrival(ack=seq_mod)
+        self._deliver(arrival)
+        if seq > self.expected:
+            arrival.nak = self.gap_to_nak(now, nak_after, upto=seq)
+        return arrival
+
+    def _deliver(self, arrival: Arrival) -> None:
+        while self.expected in self.buffered:
+            item = self.buffered.pop(self.expected)
+            self.naked.pop(self.expected, None)
+            self.expected += 1
+            if item is _EOF:
+                arrival.eof = True
+                self.eof = True
+                break
+            self.buffered_bytes -= len(item)
+            arrival.fields.append(item)
+
+    def take_fields(self, arrival: Arrival, encoding: Encoding) -> int:
+        """Decode what an arrival delivered and make it readable.
+
+        Raises:
+            MalformedDataError: a field with a valid check does not decode.
+        """
+        if not arrival.fields:
+            return 0
+        data = encoding.decode(b"".join(arrival.fields))
+        arrival.fields.clear()
+        if self.discard:
+            self.discarded_total += len(data)
+            return 0
+        self.readable += data
+        self.delivered_total += len(data)
+        arrival.delivered = len(data)
+        return len(data)
+
+    def gap_to_nak(self, now: float, nak_after: float, upto: int | None = None) -> int | None:
+        """The oldest missing packet not NAKed lately (mod 64), or None.
+
+        Without ``upto`` (a damaged packet arrived), fall back to ``expected``.
+        """
+        highest = max(self.buffered, default=self.expected - 1)
+        end = upto if upto is not None else highest
+        for seq in range(self.expected, end):
+            if seq in self.buffered:
+                continue
+            if now - self.naked.get(seq, -float("inf")) >= nak_after:
+                self.naked[seq] = now
+                return seq % 64
+        if upto is None and not self.eof:
+            seq = self.expected
+            if now - self.naked.get(seq, -float("inf")) >= nak_after:
+                self.naked[seq] = now
+                return seq % 64
+        return None
+
+    # -- flow control ------------------------------------------------------------------
+
+    def free(self) -> int:
+        """Bytes of room left for received data."""
+        return max(self.receive_buffer - len(self.readable) - self.buffered_bytes, 0)
+
+    def window_to_advertise(self) -> int:
+        """Packets the peer may send beyond ``expected``: room for full packets, capped."""
+        if self.discard:
+            return self.window
+        return min(self.window, self.free() // max(self.capacity, 1))
+
+    def read(self, max_bytes: int | None) -> bytes:
+        """Take up to ``max_bytes`` readable bytes (all of them when None)."""
+        n = len(self.readable) if max_bytes is None else min(max_bytes, len(self.readable))
+        out = bytes(self.readable[:n])
+        del self.readable[:n]
+        return out
+
+    def last_in_order(self) -> int:
+        """The sequence number (mod 64) of the last packet delivered in order."""
+        return (self.expected - 1) % 64

@@ -1,0 +1,239 @@
+"""The sending half of an endpoint: send queue, outstanding packets, retransmission.
+
+Theory of operation
+-------------------
+Sequence numbers are kept *absolute* (1, 2, 3, ...) inside and reduced mod 64
+only on the wire.  An ACK or NAK carrying ``s mod 64`` is mapped back to the
+one outstanding packet it can mean: outstanding packets span fewer than 32
+numbers, so the mapping is unique.
+
+A packet is acknowledged three ways:
+
+* its own ACK (selective repeat);
+* the cumulative "next expected" in any ACK: the peer holds every packet
+  below it (this heals lost ACKs without retransmission);
+* for window 1 only, a NAK for the *next* packet (Kermit's NAK(n+1) = ACK(n),
+  seed 003's stop-and-wait).
+
+A packet is retransmitted when
+
+* its timer expires (deadline = moment it finished leaving the UART + timeout);
+* the peer NAKs it, unless our last copy cannot have reached the peer yet;
+* an ACK shows the peer holds a later packet but still expects this one
+  (fast retransmit: a serial line never reorders, so the packet was lost).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+__all__ = ["Outstanding", "Sender"]
+
+
+@dataclass(slots=True)
+class Outstanding:
+    """One packet sent and not yet acknowledged.
+
+    Attributes:
+        seq: absolute sequence number.
+        wire: the exact bytes to resend.
+        payload: source bytes it carries (0 for EOF).
+        eof: True for the EOF (Z) packet.
+        done_at: when the last copy finished leaving the UART (estimated).
+        deadline: when the retransmission timer fires, or None while queued.
+        transmissions: copies sent so far.
+        acked: acknowledged (kept until the window slides past it).
+    """
+
+    seq: int
+    wire: bytes
+    payload: int
+    eof: bool
+    done_at: float = 0.0
+    deadline: float | None = None
+    transmissions: int = 0
+    acked: bool = False
+
+
+class Sender:
+    """Send-side bookkeeping; the endpoint decides when and what to put on the line."""
+
+    def __init__(self, *, send_buffer: int) -> None:
+        self.send_buffer = send_buffer
+        self.queue = bytearray()
+        self.base = 1
+        self.next = 1
+        self.window = 1
+        self.peer_cum = 1
+        self.peer_window = 1
+        self.outstanding: dict[int, Outstanding] = {}
+        self.retransmit: deque[int] = deque()
+        self.eof_requested = False
+        self.eof_sent = False
+        self.eof_acked = False
+        self.bytes_acked = 0
+        self.bytes_in_flight = 0
+
+    # -- application side ----------------------------------------------------------
+
+    def free(self) -> int:
+        """Bytes ``queue_data`` would accept now."""
+        return max(self.send_buffer - len(self.queue), 0)
+
+    def queue_data(self, data: bytes | bytearray | memoryview) -> int:
+        """Queue up to ``free()`` bytes; returns how many were taken."""
+        n = min(len(data), self.free())
+        self.queue += memoryview(data)[:n]
+        return n
+
+    # -- window --------------------------------------------------------------------
+
+    def in_flight(self) -> int:
+        """Packets sent and not yet acknowledged."""
+        return sum(1 for p in self.outstanding.values() if not p.acked)
+
+    def room(self, limit: int) -> int:
+        """New packets the windows allow now.
+
+        Args:
+            limit: the effective window (negotiated window capped by the
+                bandwidth-delay bound).
+        """
+        by_window = self.base + min(self.window, limit) - self.next
+        by_peer = self.peer_cum + self.peer_window - self.next
+        return max(min(by_window, by_peer), 0)
+
+    def has_new_data(self) -> bool:
+        """Something not yet packetised waits (data, or the EOF marker)."""
+        return bool(self.queue) or (self.eof_requested and not self.eof_sent)
+
+    def add(self, wire: bytes, payload: int, eof: bool) -> Outstanding:
+        """Register a new packet with the next sequence number."""
+        pkt = Outstanding(seq=self.next, wire=wire, payload=payload, eof=eof)
+        self.outstanding[self.next] = pkt
+        self.next += 1
+        self.bytes_in_flight += payload
+        if eof:
+            self.eof_sent = True
+        return pkt
+
+    def resolve(self, seq_mod: int) -> int | None:
+        """The absolute number of an outstanding packet with this wire seq, if any."""
+        offset = (seq_mod - self.base) % 64
+        return self.base + offset if offset < self.next - self.base else None
+
+    # -- acknowledgements -------------------------------------------------------------
+
+    def on_ack(
+        self, seq_mod: int, cum_mod: int | None, window: int | None, now: float
+    ) -> list[float]:
+        """Apply an ACK; returns round-trip samples (Karn: first copies only).
+
+        Args:
+            seq_mod: the ACK's sequence number (the packet it acknowledges).
+            cum_mod: the peer's next expected sequence number, mod 64.
+            window: packets the peer can accept beyond ``cum``.
+            now: arrival time.
+        """
+        samples: list[float] = []
+        seq = self.resolve(seq_mod)
+        if seq is not None:
+            self._ack_one(seq, now, samples)
+        if cum_mod is not None:
+            offset = (cum_mod - self.base) % 64
+            if offset <= self.next - self.base:
+                cum = self.base + offset
+                for s in range(self.base, cum):
+                    self._ack_one(s, now, samples)
+                if cum >= self.peer_cum:
+                    self.peer_cum = cum
+                    if window is not None:
+                        self.peer_window = window
+                # Fast retransmit: the peer holds `seq` (sent after `cum`) but not
+                # `cum`; on a line that never reorders, `cum` was lost.
+                lost = self.outstanding.get(cum)
+                later = self.outstanding.get(seq) if seq is not None else None
+                if (
+                    lost is not None
+                    and later is not None
+                    and not lost.acked
+                    and later.seq > lost.seq
+                    and lost.done_at <= later.done_at
+                    and lost.deadline is not None
+                ):
+                    self.schedule(lost.seq)
+        self._slide()
+        return samples
+
+    def on_nak(self, seq_mod: int, now: float, min_rtt: float) -> None:
+        """Apply a NAK: resend that packet unless our last copy is still on its way."""
+        seq = self.resolve(seq_mod)
+        if seq is None:
+            if self.window == 1 and seq_mod == self.next % 64 and self.next - 1 in self.outstanding:
+                # Stop-and-wait: NAK(n+1) = ACK(n) (seed 003; Kermit ckcfn2.c input()).
+                self._ack_one(self.next - 1, now, [])
+                self._slide()
+            return
+        pkt = self.outstanding[seq]
+        if pkt.acked or pkt.deadline is None:
+            return
+        if now - pkt.done_at >= min_rtt:
+            self.schedule(seq)
+
+    def _ack_one(self, seq: int, now: float, samples: list[float]) -> None:
+        pkt = self.outstanding.get(seq)
+        if pkt is None or pkt.acked:
+            return
+        pkt.acked = True
+        self.bytes_acked += pkt.payload
+        self.bytes_in_flight -= pkt.payload
+        if pkt.eof:
+            self.eof_acked = True
+        if pkt.transmissions == 1 and pkt.deadline is not None:
+            samples.append(now - pkt.done_at)
+
+    def _slide(self) -> None:
+        while self.base < self.next and self.outstanding[self.base].acked:
+            del self.outstanding[self.base]
+            self.base += 1
+        if self.retransmit:
+            self.retransmit = deque(
+                s
+                for s in self.retransmit
+                if s in self.outstanding and not self.outstanding[s].acked
+            )
+
+    # -- retransmission --------------------------------------------------------------
+
+    def schedule(self, seq: int) -> None:
+        """Queue a packet for retransmission (once, in sequence order)."""
+        if seq in self.retransmit:
+            return
+        self.retransmit.append(seq)
+        if len(self.retransmit) > 1 and self.retransmit[-2] > seq:
+            self.retransmit = deque(sorted(self.retransmit))
+
+    def expired(self, now: float) -> list[int]:
+        """Unacknowledged packets whose timer has fired and are not yet queued again."""
+        return [
+            p.seq
+            for p in self.outstanding.values()
+            if not p.acked
+            and p.deadline is not None
+            and p.deadline <= now
+            and p.seq not in self.retransmit
+        ]
+
+    def next_deadline(self) -> float | None:
+        """The earliest retransmission deadline among packets on the line."""
+        deadlines = [
+            p.deadline
+            for p in self.outstanding.values()
+            if not p.acked and p.deadline is not None and p.seq not in self.retransmit
+        ]
+        return min(deadlines) if deadlines else None
+
+    def unsent_bytes(self) -> int:
+        """Bytes queued by the application that never left."""
+        return len(self.queue)
