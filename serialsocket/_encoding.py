@@ -237,14 +237,22 @@ class Encoding:
             return []
         if count == 1:
             return [self.encode_prefix(view, capacity)]
-        arr = np.frombuffer(view[: capacity * count], dtype=np.uint8)
-        units, counts = self._units(arr)
-        flat, _ = self._emit(units, counts, None)
         tok = _token_table(self.qctl, self.qbin, self.rept)
-        lens = tok.width[units].astype(np.int64)
-        if counts is not None:
-            lens += 2 * (counts >= _MIN_RUN)
-        ends = np.cumsum(lens)
+        # Take enough source to fill every field: more than count x capacity
+        # characters once encoded (compressible data needs a wider slice).
+        # Then only the last field can reach the end of the slice early.
+        span = capacity * count
+        while True:
+            arr = np.frombuffer(view[:span], dtype=np.uint8)
+            units, counts = self._units(arr)
+            lens = tok.width[units].astype(np.int64)
+            if counts is not None:
+                lens += 2 * (counts >= _MIN_RUN)
+            ends = np.cumsum(lens)
+            if ends[-1] > capacity * count or span >= len(view):
+                break
+            span *= 4
+        flat, _ = self._emit(units, counts, None)
         src_ends = np.cumsum(counts) if counts is not None else np.arange(1, units.size + 1)
         fields: list[tuple[bytes, int]] = []
         char_base = unit_base = src_base = 0

@@ -1,0 +1,549 @@
+"""Scripted ARQ scenarios: time is stepped by hand; packets, timers and counts are exact.
+
+Unless a test says otherwise the link has a one-way delay of 1 s and no rate
+limit, so every number below is simple arithmetic:
+
+* initial timeout = physical RTT 2.0 s + a quarter of it = 2.5 s;
+* timeout floor = 1.1 x 2.0 + 0.005 = 2.205 s;
+* after one clean sample of 2.0 s: srtt 2.0, rttvar 1.0, timeout 2.0 + 4 x 1.0 = 6.0 s.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from serialsocket import (
+    BlockCheck,
+    Connected,
+    ConnectionAborted,
+    ConnectionClosed,
+    ConnectionRequested,
+    EndOfStream,
+    Endpoint,
+    EndpointConfig,
+    LinkDead,
+    LocalProtocolError,
+    Packet,
+    PacketType,
+    State,
+    build_packet,
+)
+
+from .simlink import SimLink, split_packets
+
+D = 1.0
+CFG = EndpointConfig(one_way_delay=D, window=4)
+
+
+def ack(seq: int, expected: int, window: int = 4, poll: bool = False) -> bytes:
+    data = bytes((32 + expected % 64, 32 + window)) + (b"P" if poll else b"")
+    return build_packet(Packet(seq=seq % 64, type=PacketType.ACK, data=data))
+
+
+def nak(seq: int) -> bytes:
+    return build_packet(Packet(seq=seq % 64, type=PacketType.NAK))
+
+
+def data(seq: int, field: bytes) -> bytes:
+    return build_packet(Packet(seq=seq % 64, type=PacketType.DATA, data=field))
+
+
+def connected(
+    cfg_a: EndpointConfig = CFG, cfg_b: EndpointConfig | None = None
+) -> tuple[Endpoint, Endpoint, float]:
+    """A connects at t=0, B answers at t=1, A is connected at t=2 (delay 1 s)."""
+    a, b = Endpoint(cfg_a), Endpoint(cfg_b or cfg_a)
+    b.listen()
+    a.connect(0.0)
+    b.receive_data(a.data_to_send(0.0), D)
+    a.receive_data(b.data_to_send(D), 2 * D)
+    assert a.state is State.ESTABLISHED
+    assert b.state is State.ESTABLISHED
+    assert [type(e) for e in a.events()] == [Connected]
+    assert [type(e) for e in b.events()] == [Connected]
+    return a, b, 2 * D
+
+
+# -- connection ------------------------------------------------------------------------
+
+
+def test_connect_exchange_exact() -> None:
+    a, b = Endpoint(CFG), Endpoint(CFG)
+    b.listen()
+    a.connect(0.0)
+    init = a.data_to_send(0.0)
+    assert init == build_packet(
+        # MAXL 94, TIME 2 s, no padding, CR, '#', '&' wanted, CRC-16 forced ('5'), '~',
+        # long packets + windows, window 4, MAXLX 121, telelink v1, timeout hint 2500 ms.
+        Packet(seq=0, type="I", data=b'~" @-#&5~&$!:0___@"TL@! :>'),
+        BlockCheck.CRC16,
+    )
+    assert a.get_timer() == 2.5
+    b.receive_data(init, 1.0)
+    answer = b.data_to_send(1.0)
+    assert split_packets(answer)[0][3:4] == b"Y"
+    a.receive_data(answer, 2.0)
+    stats = a.statistics()
+    assert stats.state == "established"
+    assert stats.smoothed_rtt == 2.0
+    assert stats.timeout == 6.0
+    params = a.parameters
+    assert params is not None
+    assert (params.window, params.check, params.send_max_length) == (4, BlockCheck.CRC16, 128)
+    assert params.encoding.qbin == ord("&")
+
+
+def test_init_lost_is_retransmitted_with_backoff_and_no_rtt_sample() -> None:
+    a, b = Endpoint(CFG), Endpoint(CFG)
+    b.listen()
+    a.connect(0.0)
+    a.data_to_send(0.0)  # lost
+    assert a.get_timer() == 2.5
+    a.handle_timer(2.5)
+    resent = a.data_to_send(2.5)
+    assert split_packets(resent)[0][3:4] == b"I"
+    assert a.get_timer() == 2.5 + 5.0  # backed off: 2 x 2.5
+    b.receive_data(resent, 3.5)
+    a.receive_data(b.data_to_send(3.5), 4.5)
+    assert a.state is State.ESTABLISHED
+    assert a.statistics().smoothed_rtt is None  # Karn: the init was sent twice
+    assert a.statistics().timeouts == 1
+
+
+def test_lost_init_answer_is_repeated_to_a_retransmitted_init() -> None:
+    a, b = Endpoint(CFG), Endpoint(CFG)
+    b.listen()
+    a.connect(0.0)
+    b.receive_data(a.data_to_send(0.0), 1.0)
+    first = b.data_to_send(1.0)  # lost
+    a.handle_timer(2.5)
+    b.receive_data(a.data_to_send(2.5), 3.5)
+    again = b.data_to_send(3.5)
+    assert again == first
+    a.receive_data(again, 4.5)
+    assert a.state is State.ESTABLISHED
+
+
+def test_connect_deadline() -> None:
+    a = Endpoint(EndpointConfig(one_way_delay=D, connect_timeout=6.0))
+    a.connect(0.0)
+    times = []
+    while a.state is State.CONNECTING:
+        t = a.get_timer()
+        assert t is not None
+        times.append(t)
+        a.handle_timer(t)
+        a.data_to_send(t)
+    # The second try would be at 2.5 + 5.0 (backoff), past the 6 s deadline.
+    assert times == [2.5, 6.0]
+    assert a.state is State.FAILED
+    (event,) = a.events()
+    assert isinstance(event, ConnectionAborted)
+    assert "no answer to connect within 6.0 s" in event.reason
+
+
+def test_refusal_by_the_application() -> None:
+    a = Endpoint(CFG)
+    b = Endpoint(EndpointConfig(one_way_delay=D, auto_accept=False))
+    b.listen()
+    a.connect(0.0)
+    b.receive_data(a.data_to_send(0.0), 1.0)
+    (request,) = b.events()
+    assert isinstance(request, ConnectionRequested)
+    b.refuse("arm busy: another controller is connected", 1.0)
+    a.receive_data(b.data_to_send(1.0), 2.0)
+    assert a.state is State.FAILED
+    (event,) = a.events()
+    assert event == ConnectionAborted(
+        reason="arm busy: another controller is connected", by_peer=True, refused=True
+    )
+    assert b.state is State.LISTEN  # the manipulator keeps listening
+
+
+def test_application_accept() -> None:
+    a = Endpoint(CFG)
+    b = Endpoint(EndpointConfig(one_way_delay=D, auto_accept=False))
+    b.listen()
+    a.connect(0.0)
+    b.receive_data(a.data_to_send(0.0), 1.0)
+    assert isinstance(b.events()[0], ConnectionRequested)
+    b.accept(1.0)
+    a.receive_data(b.data_to_send(1.0), 2.0)
+    assert a.state is State.ESTABLISHED
+    assert b.state is State.ESTABLISHED
+
+
+def test_incompatible_peer_is_refused_with_a_reason() -> None:
+    b = Endpoint(CFG)
+    b.listen()
+    # A real Kermit's I packet (G-Kermit's parameters: no telelink version field).
+    b.receive_data(
+        build_packet(Packet(seq=0, type="I", data=b"~' @-#Y3~*!J*0+++B\"U1A"), BlockCheck.CRC16),
+        1.0,
+    )
+    (reply,) = split_packets(b.data_to_send(1.0))
+    assert reply[3:4] == b"E"
+    assert b"Protocol version none" in reply
+    assert b.state is State.LISTEN
+
+
+def test_seven_bit_line_refuses_a_peer_that_refuses_8th_bit_prefixing() -> None:
+    from serialsocket import EIGHT_BIT_CLEAN, InitParameters
+
+    theirs = InitParameters.mine(
+        max_packet_length=128,
+        window=4,
+        check=BlockCheck.CRC16,
+        encoding=EIGHT_BIT_CLEAN,
+        timeout_hint=2.5,
+    )
+    field = bytearray(theirs.encode())
+    field[6] = ord("N")
+    b = Endpoint(CFG)
+    b.listen()
+    b.receive_data(build_packet(Packet(seq=0, type="I", data=bytes(field))), 1.0)
+    (reply,) = split_packets(b.data_to_send(1.0))
+    assert b"8th-bit prefixing refused" in reply
+
+
+# -- data transfer --------------------------------------------------------------------
+
+
+def test_stop_and_wait_exactly_as_the_paper() -> None:
+    cfg = EndpointConfig(one_way_delay=D, window=1)
+    a, b, t = connected(cfg)
+    a.send(b"MOVE", t)
+    a.send(b"", t)
+    assert a.data_to_send(t) == data(1, b"MOVE")
+    a.send(b"CLOSE", t)
+    assert a.data_to_send(t) == b""  # waits for the ACK: window 1
+    b.receive_data(data(1, b"MOVE"), t + 1)
+    assert b.data_to_send(t + 1) == ack(1, 2, window=1)
+    assert b.read() == b"MOVE"
+    a.receive_data(ack(1, 2, window=1), t + 2)
+    assert a.data_to_send(t + 2) == data(2, b"CLOSE")
+    # The packet is damaged on the line: the receiver NAKs it, the sender resends it.
+    damaged = bytearray(data(2, b"CLOSE"))
+    damaged[6] ^= 0x04
+    b.receive_data(bytes(damaged), t + 3)
+    assert b.data_to_send(t + 3) == nak(2)
+    a.receive_data(nak(2), t + 4)
+    assert a.data_to_send(t + 4) == data(2, b"CLOSE")
+    b.receive_data(data(2, b"CLOSE"), t + 5)
+    assert b.read() == b"CLOSE"
+    assert a.statistics().retransmissions == 1
+    assert a.statistics().naks_received == 1
+
+
+def test_stop_and_wait_nak_of_next_packet_acknowledges_current() -> None:
+    cfg = EndpointConfig(one_way_delay=D, window=1)
+    a, _b, t = connected(cfg)
+    a.send(b"X", t)
+    a.data_to_send(t)
+    a.receive_data(nak(2), t + 2)  # NAK(n+1) = ACK(n)
+    assert a.all_acknowledged
+
+
+def test_lost_data_packet_is_naked_and_resent_selectively() -> None:
+    a, b, t = connected()
+    out = []
+    for word in (b"one", b"two", b"three"):
+        a.send(word, t)
+        out.append(a.data_to_send(t))
+    assert out == [data(1, b"one"), data(2, b"two"), data(3, b"three")]
+    # Packet 1 is lost; 2 and 3 arrive.
+    b.receive_data(out[1] + out[2], t + 1)
+    assert b.data_to_send(t + 1) == ack(2, 1) + nak(1) + ack(3, 1)
+    assert b.read() == b""
+    a.receive_data(ack(2, 1) + nak(1) + ack(3, 1), t + 2)
+    assert a.data_to_send(t + 2) == data(1, b"one")  # only the lost one
+    b.receive_data(data(1, b"one"), t + 3)
+    assert b.read() == b"onetwothree"
+    assert b.data_to_send(t + 3) == ack(1, 4)
+    a.receive_data(ack(1, 4), t + 4)
+    assert a.all_acknowledged
+    s = a.statistics()
+    assert (s.retransmissions, s.timeouts, s.naks_received) == (1, 0, 1)
+    assert b.statistics().naks_sent == 1
+
+
+def test_lost_nak_is_covered_by_fast_retransmit() -> None:
+    a, b, t = connected()
+    a.send(b"one", t)
+    p1 = a.data_to_send(t)
+    a.send(b"two", t)
+    p2 = a.data_to_send(t)
+    del p1  # lost
+    b.receive_data(p2, t + 1)
+    reply = b.data_to_send(t + 1)
+    assert reply == ack(2, 1) + nak(1)
+    a.receive_data(ack(2, 1), t + 2)  # the NAK is lost too
+    assert a.data_to_send(t + 2) == data(1, b"one")
+    assert a.statistics().fast_retransmits == 1
+    assert a.statistics().timeouts == 0
+
+
+def test_lost_ack_times_out_resends_and_is_reacked_without_duplicate_delivery() -> None:
+    a, b, t = connected()
+    a.send(b"hello", t)
+    pkt = a.data_to_send(t)
+    assert a.get_timer() == t + 6.0  # done at t (no rate) + timeout 6.0
+    b.receive_data(pkt, t + 1)
+    b.data_to_send(t + 1)  # the ACK is lost
+    assert b.read() == b"hello"
+    a.handle_timer(t + 6.0)
+    assert a.data_to_send(t + 6.0) == pkt
+    assert a.get_timer() == t + 6.0 + 12.0  # backoff doubles the timeout
+    b.receive_data(pkt, t + 7.0)
+    assert b.data_to_send(t + 7.0) == ack(1, 2)  # old duplicate: re-ACK
+    assert b.read() == b""  # delivered exactly once
+    a.receive_data(ack(1, 2), t + 8.0)
+    assert a.all_acknowledged
+    sa, sb = a.statistics(), b.statistics()
+    assert (sa.timeouts, sa.retransmissions) == (1, 1)
+    assert sb.duplicates_received == 1
+    assert sa.smoothed_rtt == 2.0  # Karn: no sample from the retransmitted packet
+
+
+def test_lost_ack_is_healed_by_a_later_cumulative_ack() -> None:
+    a, _b, t = connected()
+    a.send(b"a", t)
+    a.data_to_send(t)
+    a.send(b"b", t)
+    a.data_to_send(t)
+    # ACK(1) lost; ACK(2) says "next expected 3": packet 1 is acknowledged too.
+    a.receive_data(ack(2, 3), t + 2)
+    assert a.all_acknowledged
+    assert a.statistics().retransmissions == 0
+
+
+def test_corrupted_packet_triggers_a_nak() -> None:
+    a, b, t = connected()
+    a.send(b"payload", t)
+    pkt = bytearray(a.data_to_send(t))
+    pkt[8] ^= 0x20
+    b.receive_data(bytes(pkt), t + 1)
+    assert b.data_to_send(t + 1) == nak(1)
+    assert b.statistics().check_failures == 1
+    # A second damaged copy within the timeout does not NAK again (rate limit).
+    b.receive_data(bytes(pkt), t + 1.5)
+    assert b.data_to_send(t + 1.5) == b""
+
+
+def test_duplicate_packet_delivered_once() -> None:
+    a, b, t = connected()
+    a.send(b"once", t)
+    pkt = a.data_to_send(t)
+    b.receive_data(pkt + pkt, t + 1)
+    assert b.read() == b"once"
+    assert b.data_to_send(t + 1) == ack(1, 2) + ack(1, 2)
+    assert b.statistics().duplicates_received == 1
+
+
+def test_both_directions_at_once() -> None:
+    a, b, t = connected()
+    a.send(b"from a", t)
+    b.send(b"from b", t)
+    pa, pb = a.data_to_send(t), b.data_to_send(t)
+    assert pa == data(1, b"from a")
+    assert pb == data(1, b"from b")
+    a.receive_data(pb, t + 1)
+    b.receive_data(pa, t + 1)
+    assert a.read() == b"from b"
+    assert b.read() == b"from a"
+    a.receive_data(b.data_to_send(t + 1), t + 2)
+    b.receive_data(a.data_to_send(t + 1), t + 2)
+    assert a.all_acknowledged
+    assert b.all_acknowledged
+
+
+def test_window_full_holds_new_data_until_an_ack() -> None:
+    a, _b, t = connected(EndpointConfig(one_way_delay=D, window=2))
+    for word in (b"1", b"2", b"3"):
+        a.send(word, t)
+        a.data_to_send(t)
+    assert a.statistics().in_flight == 2
+    assert a.statistics().bytes_queued == 1
+    a.receive_data(ack(1, 2, window=2), t + 2)
+    assert a.data_to_send(t + 2) == data(3, b"3")
+
+
+def test_large_write_is_cut_into_full_packets_and_short_write_goes_at_once() -> None:
+    a, b, t = connected(EndpointConfig(one_way_delay=D, window=31))
+    a.send(b"x" * 10 + bytes(range(256)) * 4, t)
+    packets = split_packets(a.data_to_send(t))
+    assert all(len(p) <= 129 for p in packets)
+    assert all(len(p) >= 125 for p in packets[:-1])  # full up to the last whole token
+    b.receive_data(b"".join(packets), t + 1)
+    assert b.read() == b"x" * 10 + bytes(range(256)) * 4
+
+
+def test_zero_window_then_reopen() -> None:
+    cfg = EndpointConfig(one_way_delay=D, window=31, receive_buffer=18_062)
+    a, b, t = connected(cfg)
+    link = SimLink(a, b, delay=D)
+    link.now = t
+    payload = bytes(range(256)) * 200  # 51200 bytes; the reader does not read at first
+    sent = a.send(payload, t)
+    link.run_for(60.0)
+    held = b.readable
+    assert a.statistics().peer_window == 0
+    assert 18_062 - 2 * 118 < held <= 18_062
+    link.run_for(60.0)
+    assert b.readable == held  # the window stays shut; nothing is forced in or lost
+    got = bytearray()
+
+    def drain() -> bool:
+        nonlocal sent
+        if sent < len(payload):
+            sent += a.send(payload[sent:], link.now)
+        got.extend(b.read(None, link.now))
+        return len(got) == len(payload)
+
+    link.run_until(drain)
+    assert bytes(got) == payload
+
+
+def test_paced_output_on_a_slow_line() -> None:
+    cfg = EndpointConfig(one_way_delay=1.3, line_rate=2400, window=31)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=1.3, rate=2400)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.state is State.ESTABLISHED)
+    t = link.now
+    a.send(bytes(4000), t)
+    a.send(bytes(range(256)) * 8, t)
+    burst = split_packets(a.data_to_send(t))
+    # Packets go to the UART only while less than two full packets of line time
+    # (2 x 129 bytes at 240 bytes/s) are queued there; the rest waits inside.
+    horizon = 2 * 129 / 240
+    backlog = sum(len(p) for p in burst) / 240
+    assert sum(len(p) for p in burst[:-1]) / 240 < horizon <= backlog
+    assert a.statistics().bytes_queued > 0
+    assert a.statistics().line_backlog == pytest.approx(backlog)
+    # The endpoint wakes when the backlog has drained to the horizon.
+    assert a.get_timer() == pytest.approx(t + backlog - horizon)
+
+
+# -- close, abort, liveness -------------------------------------------------------------
+
+
+def test_half_close_then_graceful_close_with_data_in_flight() -> None:
+    a, b, t = connected()
+    link = SimLink(a, b, delay=D)
+    link.now = t
+    a.send(b"last words", t)
+    a.close(t)  # EOF follows the data; a still hears b until b closes
+    got = bytearray()
+    link.run_until(lambda: b.at_eof or bool(got.extend(b.read()) or b.at_eof))
+    got.extend(b.read())
+    assert bytes(got) == b"last words"
+    assert EndOfStream() in b.events()
+    b.send(b"reply after a's EOF", link.now)  # the other direction is still open
+    b.close(link.now)
+    link.run_until(lambda: a.state is State.CLOSED and b.state is State.CLOSED)
+    assert ConnectionClosed() in a.events()
+    assert ConnectionClosed() in b.events()
+    with pytest.raises(LocalProtocolError):
+        a.send(b"x", link.now)
+
+
+def test_lost_final_ack_is_repeated_while_lingering() -> None:
+    a, b, t = connected()
+    a.close(t)
+    b.close(t)
+    za, zb = a.data_to_send(t), b.data_to_send(t)
+    assert split_packets(za)[0][3:4] == b"Z"
+    b.receive_data(za, t + 1)
+    a.receive_data(zb, t + 1)
+    ack_from_b = b.data_to_send(t + 1)
+    a.data_to_send(t + 1)  # a's ACK of b's EOF is lost
+    a.receive_data(ack_from_b, t + 2)
+    assert a.state is State.LINGER
+    assert b.state is State.ESTABLISHED
+    timer = b.get_timer()
+    assert timer is not None
+    b.handle_timer(timer)
+    a.receive_data(b.data_to_send(timer), timer + 1)  # b resends its EOF
+    b.receive_data(a.data_to_send(timer + 1), timer + 2)  # a, lingering, re-ACKs it
+    assert b.state is State.LINGER
+
+
+def test_abort_tells_the_peer_why() -> None:
+    a, b, t = connected()
+    a.abort("operator emergency stop", t)
+    b.receive_data(a.data_to_send(t), t + 1)
+    assert a.state is State.FAILED
+    assert b.state is State.FAILED
+    assert b.events() == [
+        ConnectionAborted(reason="operator emergency stop", by_peer=True, refused=False)
+    ]
+
+
+def test_dead_link_reports_what_was_delivered_and_what_was_not() -> None:
+    cfg = EndpointConfig(one_way_delay=D, window=2, dead_after=30.0)
+    a, b, t = connected(cfg)
+    a.send(b"A" * 50, t)
+    b.receive_data(a.data_to_send(t), t + 1)
+    a.receive_data(b.data_to_send(t + 1), t + 2)  # 50 bytes acknowledged
+    a.send(bytes(range(200)), t + 2)
+    a.send(bytes(300), t + 2)
+    now = t + 2
+    while a.state is State.ESTABLISHED:  # the link goes silent for good
+        a.data_to_send(now)
+        timer = a.get_timer()
+        assert timer is not None
+        now = timer
+        a.handle_timer(now)
+    assert a.state is State.DEAD
+    assert now == pytest.approx(t + 2 + 30.0)
+    (event,) = [e for e in a.events() if isinstance(e, LinkDead)]
+    assert event.bytes_acknowledged == 50
+    assert event.bytes_in_flight + event.bytes_unsent == 500
+    assert event.bytes_in_flight > 0
+
+
+def test_idle_link_is_probed_and_the_peer_answers() -> None:
+    cfg = EndpointConfig(one_way_delay=D, window=4, dead_after=40.0)
+    a, b, t = connected(cfg)
+    assert a.get_timer() == t + 10.0  # a quarter of dead_after
+    a.handle_timer(t + 10.0)
+    assert a.data_to_send(t + 10.0) == ack(0, 1, poll=True)
+    b.receive_data(ack(0, 1, poll=True), t + 11.0)
+    answer = b.data_to_send(t + 11.0)
+    assert answer == ack(0, 1)
+    a.receive_data(answer, t + 12.0)
+    assert a.state is State.ESTABLISHED
+    assert a.get_timer() == t + 22.0  # a quarter of dead_after after the peer was last heard
+
+
+def test_reset_and_listen_again() -> None:
+    a, b, t = connected()
+    a.abort("done", t)
+    b.receive_data(a.data_to_send(t), t + 1)
+    b.reset()
+    b.listen()
+    c = Endpoint(CFG)
+    c.connect(10.0)
+    b.receive_data(c.data_to_send(10.0), 11.0)
+    c.receive_data(b.data_to_send(11.0), 12.0)
+    assert c.state is State.ESTABLISHED
+    assert b.state is State.ESTABLISHED
+    with pytest.raises(LocalProtocolError):
+        b.reset()  # only from IDLE or a terminal state
+
+
+def test_illegal_operations_are_local_errors() -> None:
+    a = Endpoint(CFG)
+    with pytest.raises(LocalProtocolError):
+        a.accept(0.0)
+    a.connect(0.0)
+    with pytest.raises(
+        LocalProtocolError, match="cannot 'listen\\(\\) called' in state 'connecting'"
+    ):
+        a.listen()
+    with pytest.raises(LocalProtocolError, match="window"):
+        EndpointConfig(window=32)
+    with pytest.raises(LocalProtocolError, match="one_way_delay"):
+        EndpointConfig(one_way_delay=float("nan"))
