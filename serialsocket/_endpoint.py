@@ -157,6 +157,8 @@ class Endpoint:
     _error_sent_at: float
     _init_sent_at: float
     _init_transmissions: int
+    _window_key: tuple[int, float | None, int] | None
+    _window_cached: int
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -501,6 +503,8 @@ class Endpoint:
         self._error_sent_at = -math.inf
         self._init_sent_at = 0.0
         self._init_transmissions = 0
+        self._window_key = None
+        self._window_cached = 1
 
     def _go(self, trigger: Trigger) -> None:
         old = self._state
@@ -801,6 +805,13 @@ class Endpoint:
         return self.config.physical_rtt(self._full_wire)
 
     def _effective_window(self) -> int:
+        key = (self._sender.window, self._rtt.srtt, self._full_wire)
+        if key != self._window_key:
+            self._window_key = key
+            self._window_cached = self._compute_effective_window()
+        return self._window_cached
+
+    def _compute_effective_window(self) -> int:
         window = self._sender.window
         tx = self.config.transmit_time(self._full_wire)
         if tx <= 0:
