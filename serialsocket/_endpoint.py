@@ -255,8 +255,15 @@ class Endpoint:
         self._sender.eof_requested = True
 
     def close(self, now: float) -> None:
-        """Graceful close: send EOF, discard further incoming data, finish when
-        both directions are drained and acknowledged (ConnectionClosed)."""
+        """Graceful close of both directions (TCP's close()).
+
+        Our EOF follows everything already queued; the close finishes
+        (ConnectionClosed) when it is acknowledged and the peer's EOF has
+        arrived.  Data not yet read is discarded, and *new* data from the peer
+        after this point is refused: the connection is aborted with an E
+        packet, as TCP answers with RST, so a peer that keeps writing learns
+        that nobody reads.  Use :meth:`send_eof` to stop sending but keep
+        receiving."""
         if self._state in TERMINAL or self._state is State.LINGER:
             return
         self._sender.eof_requested = True
@@ -673,6 +680,9 @@ class Endpoint:
         self._peer_data_seen = True
         eof = packet.type == PacketType.EOF
         arrival = self._receiver.on_packet(packet.seq, packet.data, eof, now, self._rtt.timeout())
+        if self._receiver.discard and arrival.fields and self._state is State.ESTABLISHED:
+            self._finish_abort("Connection closed: data refused", by_peer=False, send=True)
+            return
         kind = arrival.classification
         if kind in ("old", "duplicate"):
             self._counters["duplicates_received"] += 1

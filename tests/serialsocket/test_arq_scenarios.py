@@ -434,19 +434,45 @@ def test_half_close_then_graceful_close_with_data_in_flight() -> None:
     link = SimLink(a, b, delay=D)
     link.now = t
     a.send(b"last words", t)
-    a.close(t)  # EOF follows the data; a still hears b until b closes
+    a.send_eof(t)  # EOF follows the data; a keeps receiving
     got = bytearray()
-    link.run_until(lambda: b.at_eof or bool(got.extend(b.read()) or b.at_eof))
-    got.extend(b.read())
+
+    def b_drained() -> bool:
+        got.extend(b.read())
+        return b.at_eof
+
+    link.run_until(b_drained)
     assert bytes(got) == b"last words"
     assert EndOfStream() in b.events()
+    with pytest.raises(LocalProtocolError):
+        a.send(b"x", link.now)
     b.send(b"reply after a's EOF", link.now)  # the other direction is still open
     b.close(link.now)
+    reply = bytearray()
+
+    def a_drained() -> bool:
+        reply.extend(a.read())
+        return a.at_eof
+
+    link.run_until(a_drained)
+    assert bytes(reply) == b"reply after a's EOF"
+    a.close(link.now)
     link.run_until(lambda: a.state is State.CLOSED and b.state is State.CLOSED)
     assert ConnectionClosed() in a.events()
     assert ConnectionClosed() in b.events()
-    with pytest.raises(LocalProtocolError):
-        a.send(b"x", link.now)
+
+
+def test_data_after_close_is_refused_like_a_reset() -> None:
+    a, b, t = connected()
+    b.close(t)
+    a.send(b"anyone there?", t)
+    b.receive_data(a.data_to_send(t), t + 1)
+    assert b.state is State.FAILED
+    a.receive_data(b.data_to_send(t + 1), t + 2)
+    assert a.state is State.FAILED
+    assert a.events()[-1] == ConnectionAborted(
+        reason="Connection closed: data refused", by_peer=True, refused=False
+    )
 
 
 def test_lost_final_ack_is_repeated_while_lingering() -> None:
