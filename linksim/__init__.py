@@ -1,3 +1,55 @@
-"""linksim: the world around the link -- impaired channels, simulated modems and arm, benchmarks."""
+"""linksim: the world around the link -- impaired lines, a pty relay, simulated modems, benchmarks.
 
-__all__: list[str] = []
+* :class:`LinkConfig` / :class:`DirectionConfig`: impairment parameters, presets, TOML.
+* :class:`LinkDirection`: the sans-I/O impairment engine (one per direction).
+* :func:`open_impaired_link`: two connected trio streams over an impaired line.
+* :func:`run_relay`: the same line between two real ptys (``linksim relay``).
+* :class:`ModemPair`: two emulated Hayes modems joined by the line (``linksim relay --modem``).
+"""
+
+from ._channel import ImpairedLink, LinkEnd, LinkStatistics, open_impaired_link
+from ._config import (
+    PRESETS,
+    ConfigError,
+    DirectionConfig,
+    FaultAction,
+    GilbertElliott,
+    LinkConfig,
+    Outage,
+    ScriptedFault,
+)
+from ._impair import DirectionStatistics, LinkDirection
+from ._modem import (
+    TRANSITIONS,
+    CallOutcome,
+    ModemConfig,
+    ModemPair,
+    ModemState,
+    ModemStateError,
+)
+from ._relay import RelayStatistics, run_relay
+
+__all__ = [
+    "PRESETS",
+    "TRANSITIONS",
+    "CallOutcome",
+    "ConfigError",
+    "DirectionConfig",
+    "DirectionStatistics",
+    "FaultAction",
+    "GilbertElliott",
+    "ImpairedLink",
+    "LinkConfig",
+    "LinkDirection",
+    "LinkEnd",
+    "LinkStatistics",
+    "ModemConfig",
+    "ModemPair",
+    "ModemState",
+    "ModemStateError",
+    "Outage",
+    "RelayStatistics",
+    "ScriptedFault",
+    "open_impaired_link",
+    "run_relay",
+]

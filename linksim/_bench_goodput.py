@@ -95,7 +95,7 @@ def theoretical_goodput(
     wire = sum(len(f) + 7 + 3 + 1 for f, _ in full)  # extended header, CRC, EOL
     if max_len <= 96:
         wire -= 3 * len(full)  # normal header is 3 shorter
-    per_packet_error = 1 - (1 - byte_error_rate) ** (wire / len(full))
+    per_packet_error = 1.0 - float((1.0 - byte_error_rate) ** (wire / len(full)))
     return rate / bits_per_char * carried / wire * (1 - per_packet_error)
 
 
@@ -150,7 +150,12 @@ def run_transfer(
             pos += a.send(memoryview(payload)[pos:], now)
         ab.send(a.data_to_send(now), now)
         ba.send(b.data_to_send(now), now)
-        timers = [t for t in (a.get_timer(), b.get_timer()) if t is not None]
+        timers = [
+            t
+            for ep in (a, b)
+            for t in (ep.get_timer(), ep.get_send_timer())
+            if t is not None
+        ]
         arrivals = [t for t in (ab.next_delivery(), ba.next_delivery()) if t is not None]
         if not (timers or arrivals) or now > limit:
             break

@@ -1,24 +1,223 @@
-"""The ``linksim`` command: ``linksim bench codec`` (more subcommands join as they land)."""
+"""The ``linksim`` command: ``relay`` (impaired pty relay, optional modems) and ``bench``."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
+import pathlib
+import signal
+import sys
 from collections.abc import Sequence
+from typing import Any
 
-from . import _bench_codec
+import trio
 
-__all__ = ["main"]
+from . import _bench_codec, _bench_goodput, _bench_relay
+from ._config import PRESETS, ConfigError, DirectionConfig, GilbertElliott, LinkConfig, Outage
+from ._modem import CallOutcome, ModemConfig, ModemPair
+from ._relay import RelayStatistics, run_relay
+
+__all__ = ["build_parser", "config_from_args", "main"]
+
+
+def _outage(text: str) -> Outage:
+    try:
+        start, end = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--outage wants T1:T2 in seconds, got {text!r}") from None
+    try:
+        return Outage(start, end)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _burst(text: str) -> GilbertElliott:
+    try:
+        values = [float(x) for x in text.split(":")]
+        if not 2 <= len(values) <= 4:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--burst wants P_GB:P_BG[:ERROR_BAD[:ERROR_GOOD]], got {text!r}"
+        ) from None
+    values += [0.5, 0.0][len(values) - 2 :]  # defaults: error_bad 0.5, error_good 0
+    try:
+        return GilbertElliott(
+            p_good_to_bad=values[0],
+            p_bad_to_good=values[1],
+            error_bad=values[2],
+            error_good=values[3],
+        )
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_link_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options that describe the line (shared by relay and benchmarks)."""
+    g = ap.add_argument_group("line (applied to both directions, over --preset or --config)")
+    g.add_argument("--preset", choices=PRESETS, help="named preset (default: clean)")
+    g.add_argument("--config", type=pathlib.Path, help="TOML file (see LinkConfig.from_toml)")
+    g.add_argument("--seed", type=int, help="RNG seed (default 0)")
+    g.add_argument("--rate", type=float, help="line rate, bit/s")
+    g.add_argument("--bits", type=int, dest="bits_per_char", help="bits per character (8N1 = 10)")
+    g.add_argument("--delay", type=float, help="one-way delay, s")
+    g.add_argument("--jitter", type=float, help="order-preserving jitter, s (uniform 0..J)")
+    g.add_argument("--loss", type=float, help="byte loss probability")
+    g.add_argument(
+        "--ber", "--byte-error-rate", type=float, dest="byte_error_rate", help="byte error rate"
+    )
+    g.add_argument("--noise", type=float, help="probability of a noise byte after each byte")
+    g.add_argument("--burst", type=_burst, help="Gilbert-Elliott P_GB:P_BG[:E_BAD[:E_GOOD]]")
+    g.add_argument(
+        "--outage", type=_outage, action="append", dest="outages", help="T1:T2 (repeatable)"
+    )
+
+
+def config_from_args(args: argparse.Namespace) -> LinkConfig:
+    """The LinkConfig the options describe (raises ConfigError on bad values)."""
+    if args.config is not None:
+        if args.preset is not None:
+            raise ConfigError("give --preset or --config, not both (a TOML file can name a preset)")
+        config = LinkConfig.from_toml(args.config)
+    else:
+        config = LinkConfig.preset(args.preset or "clean")
+    names = [f.name for f in dataclasses.fields(DirectionConfig)]
+    overrides: dict[str, Any] = {
+        n: getattr(args, n) for n in names if getattr(args, n, None) is not None
+    }
+    if "outages" in overrides:
+        overrides["outages"] = tuple(overrides["outages"])
+    return LinkConfig(
+        a_to_b=dataclasses.replace(config.a_to_b, **overrides),
+        b_to_a=dataclasses.replace(config.b_to_a, **overrides),
+        seed=config.seed if args.seed is None else args.seed,
+    )
+
+
+def _relay_arguments(ap: argparse.ArgumentParser) -> None:
+    add_link_arguments(ap)
+    ap.add_argument(
+        "--device", action="append", dest="devices", help="attach to this tty (give two)"
+    )
+    ap.add_argument("--json", action="store_true", help='print {"a": PATH, "b": PATH} on one line')
+    ap.add_argument("--stats", action="store_true", help="print live counters to stderr")
+    ap.add_argument("--stats-interval", type=float, default=1.0, help="seconds between counters")
+    ap.add_argument("--duration", type=float, help="stop after this many seconds")
+    m = ap.add_argument_group("modems")
+    m.add_argument("--modem", action="store_true", help="put both ends behind Hayes modems")
+    m.add_argument("--busy", action="append", default=[], help="number that answers BUSY")
+    m.add_argument("--no-answer", action="append", default=[], help="number that never answers")
+    m.add_argument("--dial-time", type=float, default=2.0, help="ATD to first RING, s")
+    m.add_argument("--ring-interval", type=float, default=6.0, help="between RINGs, s")
+    m.add_argument("--handshake-time", type=float, default=1.5, help="answer to CONNECT, s")
+
+
+def _stats_record(stats: RelayStatistics) -> dict[str, Any]:
+    return {
+        "elapsed": round(stats.elapsed, 3),
+        "a_to_b": dataclasses.asdict(stats.a_to_b),
+        "b_to_a": dataclasses.asdict(stats.b_to_a),
+    }
+
+
+def _print_stats(stats: RelayStatistics, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(_stats_record(stats)), file=sys.stderr, flush=True)
+        return
+    parts = []
+    for name, d in (("a->b", stats.a_to_b), ("b->a", stats.b_to_a)):
+        parts.append(
+            f"{name} sent {d.bytes_sent} delivered {d.bytes_delivered} dropped {d.bytes_dropped}"
+            f" corrupted {d.bytes_corrupted} inserted {d.bytes_inserted}"
+            f" in-flight {d.bytes_in_flight}"
+        )
+    print(f"[{stats.elapsed:9.1f}s] " + " | ".join(parts), file=sys.stderr, flush=True)
+
+
+def relay_main(args: argparse.Namespace) -> int:
+    """``linksim relay``: exits 0 on SIGINT, SIGTERM or after --duration."""
+    try:
+        config = config_from_args(args)
+    except ConfigError as exc:
+        print(f"linksim relay: {exc}", file=sys.stderr)
+        return 2
+    modems = None
+    if args.modem:
+        book = dict.fromkeys(args.busy, CallOutcome.BUSY)
+        book |= dict.fromkeys(args.no_answer, CallOutcome.NO_ANSWER)
+        rates = [d.rate for d in (config.a_to_b, config.b_to_a) if d.rate is not None]
+        modems = ModemPair(
+            ModemConfig(
+                dial_time=args.dial_time,
+                ring_interval=args.ring_interval,
+                handshake_time=args.handshake_time,
+                connect_rate=int(min(rates)) if rates else 2400,
+                phone_book=book,
+            )
+        )
+
+    def ready(a: str, b: str) -> None:
+        if args.json:
+            print(json.dumps({"a": a, "b": b}), flush=True)
+        else:
+            print(a, b, sep="\n", flush=True)
+
+    def stats(s: RelayStatistics) -> None:
+        _print_stats(s, args.json)
+
+    async def run() -> RelayStatistics:
+        stop = trio.Event()
+        async with trio.open_nursery() as nursery:
+
+            async def watch_signals() -> None:
+                with trio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                    async for _ in signals:
+                        stop.set()
+                        return
+
+            nursery.start_soon(watch_signals)
+            result = await run_relay(
+                config,
+                devices=args.devices,
+                modems=modems,
+                duration=args.duration,
+                stop=stop,
+                on_ready=ready,
+                on_stats=stats if args.stats else None,
+                stats_interval=args.stats_interval,
+            )
+            nursery.cancel_scope.cancel()
+        return result
+
+    try:
+        final = trio.run(run)
+    except (OSError, ValueError) as exc:
+        print(f"linksim relay: {exc}", file=sys.stderr)
+        return 1
+    if args.stats:
+        _print_stats(final, args.json)
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser; subcommands register here."""
     ap = argparse.ArgumentParser(prog="linksim", description="Impaired links and benchmarks.")
     sub = ap.add_subparsers(dest="command", required=True)
+    relay = sub.add_parser("relay", help="impaired relay between two ptys (or given ttys)")
+    _relay_arguments(relay)
+    relay.set_defaults(func=relay_main)
     bench = sub.add_parser("bench", help="benchmarks (measure speed; not tests)")
     bench_sub = bench.add_subparsers(dest="bench", required=True)
     codec = bench_sub.add_parser("codec", help="Kermit encode/decode speed")
     _bench_codec.add_arguments(codec)
     codec.set_defaults(func=_bench_codec.main)
+    goodput = bench_sub.add_parser("goodput", help="ARQ goodput against the theoretical limit")
+    _bench_goodput.add_arguments(goodput)
+    goodput.set_defaults(func=_bench_goodput.main)
+    brelay = bench_sub.add_parser("relay", help="pty relay throughput on a clean link")
+    _bench_relay.add_arguments(brelay)
+    brelay.set_defaults(func=_bench_relay.main)
     return ap
 
 
