@@ -5,6 +5,7 @@
 * :func:`open_impaired_link`: two connected trio streams over an impaired line.
 * :func:`run_relay`: the same line between two real ptys (``linksim relay``).
 * :class:`ModemPair`: two emulated Hayes modems joined by the line (``linksim relay --modem``).
+* :func:`serial_socket_pair`: two connected serial sockets over an impaired line.
 """
 
 from ._channel import ImpairedLink, LinkEnd, LinkStatistics, open_impaired_link
@@ -27,6 +28,7 @@ from ._modem import (
     ModemState,
     ModemStateError,
 )
+from ._pair import endpoint_config_for, serial_socket_pair
 from ._relay import RelayStatistics, run_relay
 
 __all__ = [
@@ -50,6 +52,8 @@ __all__ = [
     "Outage",
     "RelayStatistics",
     "ScriptedFault",
+    "endpoint_config_for",
     "open_impaired_link",
     "run_relay",
+    "serial_socket_pair",
 ]

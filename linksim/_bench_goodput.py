@@ -151,10 +151,7 @@ def run_transfer(
         ab.send(a.data_to_send(now), now)
         ba.send(b.data_to_send(now), now)
         timers = [
-            t
-            for ep in (a, b)
-            for t in (ep.get_timer(), ep.get_send_timer())
-            if t is not None
+            t for ep in (a, b) for t in (ep.get_timer(), ep.get_send_timer()) if t is not None
         ]
         arrivals = [t for t in (ab.next_delivery(), ba.next_delivery()) if t is not None]
         if not (timers or arrivals) or now > limit:

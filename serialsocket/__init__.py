@@ -42,6 +42,18 @@ from ._parser import PacketRejected as PacketRejected
 from ._parser import ParserEvent as ParserEvent
 from ._parser import ParserStatistics as ParserStatistics
 from ._parser import RejectReason as RejectReason
+from ._socket import LineFailed as LineFailed
+from ._socket import LinkBroken as LinkBroken
+from ._socket import LinkDeadError as LinkDeadError
+from ._socket import PeerAborted as PeerAborted
+from ._socket import SerialListener as SerialListener
+from ._socket import SerialSocket as SerialSocket
+from ._socket import SocketStatistics as SocketStatistics
+from ._socket import accept as accept
+from ._socket import connect as connect
+from ._socket import listen as listen
+from ._socket import open_serial_socket as open_serial_socket
+from ._socket import serve as serve
 from ._state import State as State
 from ._wire import DEFAULT_MAX_PACKET_LENGTH as DEFAULT_MAX_PACKET_LENGTH
 from ._wire import MAX_PACKET_LENGTH as MAX_PACKET_LENGTH
@@ -68,7 +80,10 @@ __all__ = [
     "EndpointStatistics",
     "Event",
     "InitParameters",
+    "LineFailed",
+    "LinkBroken",
     "LinkDead",
+    "LinkDeadError",
     "LocalProtocolError",
     "MalformedDataError",
     "Negotiated",
@@ -79,13 +94,22 @@ __all__ = [
     "PacketType",
     "ParserEvent",
     "ParserStatistics",
+    "PeerAborted",
     "ProtocolError",
     "RejectReason",
     "RemoteProtocolError",
+    "SerialListener",
+    "SerialSocket",
+    "SocketStatistics",
     "State",
+    "accept",
     "build_packet",
     "check_chars",
+    "connect",
     "crc16_kermit",
     "data_capacity",
+    "listen",
+    "open_serial_socket",
     "packet_length",
+    "serve",
 ]

@@ -16,13 +16,18 @@ from ._checks import BlockCheck
 from ._encoding import PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._packet import data_capacity
-from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, MIN_PACKET_LENGTH
+from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
-__all__ = ["MAX_WINDOW", "EndpointConfig"]
+__all__ = ["MAX_WINDOW", "MIN_ENDPOINT_PACKET_LENGTH", "EndpointConfig"]
 
 MAX_WINDOW = 31
 """Largest window: sequence numbers are mod 64 and selective repeat needs the
 window to be at most half the space (Kermit's 31; E-Kermit P_WSLOTS)."""
+
+MIN_ENDPOINT_PACKET_LENGTH = 33
+"""The init packet is 33 characters (26 data + header + CRC): each side must
+receive it, so no endpoint may announce less (MIN_PACKET_LENGTH bounds the
+packet layer alone)."""
 
 _ACK_WIRE = 10
 """Wire bytes of an ACK (MARK LEN SEQ TYPE + 2 data + 3 CRC + CR)."""
@@ -63,7 +68,8 @@ class EndpointConfig:
         auto_accept: a listening side accepts connection requests itself; if
             False it emits ConnectionRequested and waits for accept()/refuse().
         linger: seconds to keep answering the peer's retransmitted EOF after a
-            graceful close; None derives it: 2 x the current timeout.
+            graceful close; None derives it: ``dead_after`` (a new connection
+            request ends it early).
     """
 
     max_packet_length: int = DEFAULT_MAX_PACKET_LENGTH
@@ -85,11 +91,12 @@ class EndpointConfig:
         def bad(name: str, value: object, allowed: str) -> LocalProtocolError:
             return LocalProtocolError(f"EndpointConfig.{name}={value!r}: must be {allowed}")
 
-        if not MIN_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
+        if not MIN_ENDPOINT_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
             raise bad(
                 "max_packet_length",
                 self.max_packet_length,
-                f"{MIN_PACKET_LENGTH}..{MAX_PACKET_LENGTH} (MARK through CHECK)",
+                f"{MIN_ENDPOINT_PACKET_LENGTH}..{MAX_PACKET_LENGTH} (MARK through CHECK; "
+                "the init packet must fit)",
             )
         if not 1 <= self.window <= MAX_WINDOW:
             raise bad("window", self.window, f"1..{MAX_WINDOW}")

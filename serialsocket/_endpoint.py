@@ -7,7 +7,8 @@ Usage (the I/O adapter's loop)::
     line.write(ep.data_to_send(now))
     ...on bytes from the line:   ep.receive_data(chunk, now)
     ...when now >= ep.get_timer(): ep.handle_timer(now)
-    ...after either:             line.write(ep.data_to_send(now)); handle ep.events()
+    ...when now >= ep.get_send_timer(): (paced data may go out)
+    ...after any of these:       line.write(ep.data_to_send(now)); handle ep.events()
     ...application:              ep.send(data, now); ep.read(n, now); ep.send_eof(now)
 
 Output pacing
@@ -368,15 +369,23 @@ class Endpoint:
             return self._linger_until
         if st is not State.ESTABLISHED:
             return None
-        times = [self._last_heard + self._dead_after]
+        times = [self._last_heard + self._dead_after, self._next_probe_time()]
         deadline = self._sender.next_deadline()
         if deadline is not None:
             times.append(deadline)
-        wake = self._pacing_wake()
-        if wake is not None:
-            times.append(wake)
-        times.append(self._next_probe_time())
         return min(times)
+
+    def get_send_timer(self) -> float | None:
+        """When :meth:`data_to_send` will next release paced data, or None.
+
+        Separate from :meth:`get_timer` because it concerns the writer, not the
+        protocol: an I/O loop whose writer is blocked on a slow port must not
+        spin on it.  None when nothing waits, when the window is shut, or when
+        the line rate is unknown (then data is released as soon as it may be).
+        """
+        if self._state is not State.ESTABLISHED:
+            return None
+        return self._pacing_wake()
 
     def handle_timer(self, now: float) -> None:
         """Run whatever timers are due at ``now`` (safe to call early)."""
@@ -405,7 +414,9 @@ class Endpoint:
         if st is not State.ESTABLISHED:
             return
         silence = now - self._last_heard
-        if silence >= self._dead_after:
+        # Compare exactly as get_timer computes the deadline: rearranged, float
+        # rounding can leave the timer due but never firing (a spin).
+        if now >= self._last_heard + self._dead_after:
             self._declare_dead(silence)
             return
         expired = self._sender.expired(now)
@@ -527,6 +538,10 @@ class Endpoint:
 
     def _on_init(self, packet: Packet, now: float) -> None:
         st = self._state
+        if st is State.LINGER:
+            # The peer has moved on to a new connection: our last ACK arrived.
+            self._go(Trigger.LINGER_EXPIRED)
+            return
         if st is State.ESTABLISHED:
             if self._peer_data_seen:
                 self._finish_abort(
@@ -702,7 +717,10 @@ class Endpoint:
     def _check_closed(self, now: float) -> None:
         if self._state is State.ESTABLISHED and self._sender.eof_acked and self._receiver.eof:
             self._go(Trigger.BOTH_CLOSED)
-            self._linger_until = now + (self.config.linger or 2 * self._rtt.timeout())
+            # The peer resends its EOF on its own, possibly backed-off, timer: stay
+            # as long as it could keep trying before it would declare us dead.
+            # A new connection request ends the linger early (see _on_init).
+            self._linger_until = now + (self.config.linger or self._dead_after)
             self._events.append(ConnectionClosed())
 
     @staticmethod
@@ -757,7 +775,7 @@ class Endpoint:
         if not wants:
             return None
         if self.config.line_rate is None or self._line_free_at is None:
-            return self._clock
+            return None
         return self._line_free_at - self._horizon()
 
     def _release_data(self, now: float, out: list[bytes]) -> None:

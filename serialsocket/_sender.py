@@ -188,14 +188,16 @@ class Sender:
         pkt.acked = True
         self.bytes_acked += pkt.payload
         self.bytes_in_flight -= pkt.payload
-        if pkt.eof:
-            self.eof_acked = True
         if pkt.transmissions == 1 and pkt.deadline is not None:
             samples.append(now - pkt.done_at)
 
     def _slide(self) -> None:
         while self.base < self.next and self.outstanding[self.base].acked:
-            del self.outstanding[self.base]
+            # EOF counts as acknowledged only when the window slides past it,
+            # i.e. when every packet before it is acknowledged too: a selective
+            # ACK of Z alone must not close the stream over a missing packet.
+            if self.outstanding.pop(self.base).eof:
+                self.eof_acked = True
             self.base += 1
         if self.retransmit:
             self.retransmit = deque(

@@ -110,6 +110,18 @@ def test_public_names_are_pinned() -> None:
             "crc16_kermit",
             "data_capacity",
             "packet_length",
+            "LineFailed",
+            "LinkBroken",
+            "LinkDeadError",
+            "PeerAborted",
+            "SerialListener",
+            "SerialSocket",
+            "SocketStatistics",
+            "accept",
+            "connect",
+            "listen",
+            "open_serial_socket",
+            "serve",
         ]
     )
     for name in serialsocket.__all__:

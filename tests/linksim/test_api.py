@@ -50,8 +50,10 @@ def test_public_names_are_pinned() -> None:
             "Outage",
             "RelayStatistics",
             "ScriptedFault",
+            "endpoint_config_for",
             "open_impaired_link",
             "run_relay",
+            "serial_socket_pair",
         ]
     )
     for name in linksim.__all__:

@@ -85,7 +85,12 @@ class SimLink:
                     self._n += 1
 
     def next_time(self) -> float:
-        times = [t for t in (self.a.get_timer(), self.b.get_timer()) if t is not None]
+        times = [
+            t
+            for ep in (self.a, self.b)
+            for t in (ep.get_timer(), ep.get_send_timer())
+            if t is not None
+        ]
         if self._heap:
             times.append(self._heap[0][0])
         return min(times) if times else math.inf

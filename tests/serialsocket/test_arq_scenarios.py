@@ -422,8 +422,8 @@ def test_paced_output_on_a_slow_line() -> None:
     assert sum(len(p) for p in burst[:-1]) / 240 < horizon <= backlog
     assert a.statistics().bytes_queued > 0
     assert a.statistics().line_backlog == pytest.approx(backlog)
-    # The endpoint wakes when the backlog has drained to the horizon.
-    assert a.get_timer() == pytest.approx(t + backlog - horizon)
+    # The writer wakes when the backlog has drained to the horizon.
+    assert a.get_send_timer() == pytest.approx(t + backlog - horizon)
 
 
 # -- close, abort, liveness -------------------------------------------------------------

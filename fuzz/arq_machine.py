@@ -1,0 +1,713 @@
+"""A hypothesis state machine that fuzzes two ARQ endpoints over a hostile model wire.
+
+The model
+---------
+Endpoint A connects, endpoint B listens.  Between them run two independent
+one-way lines ("ab" carries A's bytes to B, "ba" the reverse).  Each line is a
+FIFO of :class:`Chunk` s -- byte strings with an arrival time -- that models a
+UART (``line_rate``, 10 bits per character, or instantaneous when the rate is
+None) followed by a fixed propagation delay.  What an endpoint writes is cut
+into one chunk per packet (at each MARK), so rules can name "the third packet
+on the line".
+
+Hypothesis then interleaves application calls, time, and impairments:
+
+* the application sends (random bytes, long runs, control and prefix
+  characters, as much as ``send_buffer_free`` allows), reads, and half-closes;
+* time advances to the next timer or arrival, or a named line delivers its
+  head chunk (timers due before that arrival fire first, in order: time never
+  runs backwards and no timer is skipped);
+* the line drops a chunk or a slice of one, flips one bit, inserts garbage,
+  duplicates a chunk, splits one into two reads, or delays one.
+
+The line never *reorders*: every impairment keeps arrival times
+non-decreasing along the FIFO.  A duplicate is inserted directly after its
+original, which is exactly what a retransmission looks like on the wire.
+Replaying a stale copy much later is deliberately outside the model: with
+sequence numbers mod 64 and windows up to 31, a packet replayed after the
+receiver moved on by more than 32 packets is indistinguishable from a new one
+-- for this protocol and for Kermit alike -- so such a failure would be the
+model's fault, not the endpoint's.  For the same reason the block check is
+fixed at CRC-16, which catches every 1-, 2- or 3-bit error in a packet (the
+additive 6- and 12-bit checks can be fooled by two compensating flips).
+
+Liveness is kept out of the impairment phase by configuration: ``dead_after``
+and ``connect_timeout`` are 10**6 s and retries are unlimited, so no amount of
+damage lets an endpoint give up.  At the end of every example, ``teardown``
+heals the line (chunks already on it stay, possibly damaged; nothing new is
+impaired), half-closes each side once everything it sent is acknowledged, and
+runs the simulation until both endpoints are CLOSED, reading everything.
+
+Three known endpoint bugs are stepped around, each pinned by a strict xfail test
+in tests/serialsocket/test_arq_stateful.py so the fuzzer keeps hunting new ones:
+``SMALLEST_LENGTH`` (the init packet does not fit small packet lengths),
+``LINGER`` (the derived linger is too short) and ``EOF_AFTER_ACKS`` (a selective
+ACK of the EOF closes with data outstanding).
+
+Properties
+----------
+After every step (``@invariant``):
+
+* per direction, the bytes the receiver's application has read are a prefix of
+  the bytes the sender's ``send`` accepted -- which alone rules out loss in
+  the middle, duplication, reordering and corruption;
+* an endpoint that reports EndOfStream has delivered everything its peer sent,
+  and the peer did call ``send_eof``;
+* once a side has every packet acknowledged, its peer has delivered every byte;
+* no endpoint is FAILED or DEAD, and none reported ConnectionAborted or LinkDead;
+* no timer stays due after it was handled (a busy loop in a real event loop);
+* Connected, EndOfStream and ConnectionClosed are each reported at most once.
+
+After healing (``teardown``): both sides read exactly what the other sent,
+each reported Connected, EndOfStream and ConnectionClosed exactly once, and
+both reached State.CLOSED within a bounded number of events and simulated time.
+
+No endpoint call may raise: any exception fails the example.  Time is explicit
+(``self.now``); nothing reads a clock or sleeps.
+"""
+
+from __future__ import annotations
+
+import itertools
+import random
+from dataclasses import dataclass, field
+
+from hypothesis import strategies as st
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    initialize,
+    invariant,
+    precondition,
+    rule,
+)
+
+from serialsocket import (
+    EIGHT_BIT_CLEAN,
+    MAX_PACKET_LENGTH,
+    MAX_WINDOW,
+    PRINTABLE,
+    Connected,
+    ConnectionAborted,
+    ConnectionClosed,
+    EndOfStream,
+    Endpoint,
+    EndpointConfig,
+    Event,
+    LinkDead,
+    State,
+)
+
+__all__ = [
+    "FINISH_MAX_EVENTS",
+    "LINGER",
+    "LIVENESS_TIMEOUT",
+    "ARQMachine",
+    "Chunk",
+    "Line",
+    "payloads",
+    "split_packets",
+]
+
+LIVENESS_TIMEOUT = 1e6
+"""``dead_after`` and ``connect_timeout`` for both endpoints (seconds): far beyond
+any simulated time an example reaches, so impairments never end a connection."""
+
+LINGER = LIVENESS_TIMEOUT / 10
+"""Explicit ``linger`` for both endpoints (seconds).  The derived default, twice
+the lingering side's own timeout, can end before the peer's backed-off
+retransmission of its EOF arrives, and the peer then never closes (a bug pinned
+by ``test_linger_outlasts_peer_eof_retransmission``).  A linger longer than any
+backoff ceiling keeps that known failure from masking everything else."""
+
+IMPAIRMENT_HORIZON = LIVENESS_TIMEOUT / 10
+"""Before healing, time never passes this instant.  Simulated idleness is free:
+without a bound, a few ``advance_time`` steps jump from idle probe to idle probe
+(``dead_after / 4`` apart), the line drops the answers, and the link is rightly
+declared dead.  With it, no silence before healing nears ``dead_after``, and
+healing plus closing (``FINISH_MAX_SECONDS``) ends before it, too."""
+
+FINISH_MAX_EVENTS = 20_000
+"""Events (timer firings plus chunk arrivals) the healed link may take to close.
+A clean close of the largest transfer (a few KB in 12-byte packets at window 1)
+takes a few thousand; more means a livelock."""
+
+FINISH_MAX_SECONDS = LIVENESS_TIMEOUT / 2
+"""Simulated seconds the healed link may take to close.  Generous on purpose: a
+window update lost before healing is only repaired by the idle probe, which
+fires after ``dead_after / 4``."""
+
+FINISH_STALL_EVENTS = 1_000
+"""Events the healed link may process in a row without progress (a state change,
+a byte delivered or acknowledged, a window sliding) before we call it stuck.
+Draining a line full of duplicates and noise takes far fewer; a connection
+that retransmits into a void forever hits this long before the time limit."""
+
+SMALLEST_LENGTH = 33
+"""The smallest ``max_packet_length`` drawn.  EndpointConfig accepts 12, but the
+init packet is 33 characters and the parser rejects it as too long below
+that, so such an endpoint can never connect (a bug pinned by
+``test_smallest_packet_length_can_connect`` in tests/serialsocket/test_arq_stateful.py).
+Drawing shorter lengths would only rediscover it."""
+
+EOF_AFTER_ACKS = False
+"""Half-close only once everything sent so far is acknowledged.  Otherwise a
+selective ACK of the EOF, with an earlier data packet lost, makes the sender
+report ConnectionClosed and stop without ever resending that data (a bug pinned
+by ``test_eof_acked_before_data_does_not_close``).  With nothing else
+outstanding, an ACK of the EOF is necessarily cumulative, so the bug cannot
+fire; set to False to hunt it."""
+
+TIMER_SPIN_LIMIT = 64
+"""Consecutive ``handle_timer`` calls at one instant before we call it a spin:
+a timer that stays due after it was handled (and output flushed) would make a
+real event loop busy-wait."""
+
+SIDES = ("a", "b")
+DIRECTIONS = ("ab", "ba")
+
+_SPECIAL = b"\x00\x01\x0d\x0a\x1b\x7f\x80\x81\x8d\xff#&~ "
+"""Bytes the prefix encoding treats specially: controls, MARK, CR, DEL, 8th-bit
+controls, and the default QCTL/QBIN/REPT prefix characters."""
+
+
+def split_packets(data: bytes) -> list[bytes]:
+    """Cut an endpoint's output into packets at each MARK (SOH)."""
+    starts = [i for i, byte in enumerate(data) if byte == 1 and i > 0]
+    bounds = [0, *starts, len(data)]
+    return [data[x:y] for x, y in itertools.pairwise(bounds) if y > x]
+
+
+def payloads(max_size: int = 600) -> st.SearchStrategy[bytes]:
+    """Application payloads: random bytes, long runs (repeat compression), and
+    mixes of the characters the encoding must quote."""
+    runs = st.builds(
+        lambda byte, n: bytes([byte]) * n,
+        st.integers(0, 255),
+        st.integers(1, max_size),
+    )
+    special = st.lists(st.sampled_from(list(_SPECIAL)), max_size=max_size).map(bytes)
+    mixed = st.lists(st.one_of(st.binary(max_size=40), runs, special), max_size=6).map(
+        lambda parts: b"".join(parts)[:max_size]
+    )
+    return st.one_of(st.binary(max_size=max_size), runs, special, mixed)
+
+
+@dataclass(slots=True)
+class Chunk:
+    """Bytes on the line and the instant they finish arriving at the far end."""
+
+    arrival: float
+    data: bytes
+
+
+@dataclass(slots=True)
+class Line:
+    """One direction of the wire: a UART with a rate, then a fixed delay; FIFO.
+
+    ``chunks`` is kept sorted by arrival time (never reordered); impairment
+    helpers call :meth:`restore_order` after changing an arrival time.
+    """
+
+    delay: float
+    rate: float | None
+    bits: int = 10
+    free_at: float = 0.0
+    chunks: list[Chunk] = field(default_factory=list)
+
+    def transmit(self, now: float, data: bytes) -> None:
+        """Put bytes written at ``now`` on the line, behind whatever is queued."""
+        start = max(now, self.free_at)
+        self.free_at = start + (0.0 if self.rate is None else len(data) * self.bits / self.rate)
+        arrival = self.free_at + self.delay
+        if self.chunks:
+            arrival = max(arrival, self.chunks[-1].arrival)
+        self.chunks.append(Chunk(arrival, data))
+
+    def restore_order(self, start: int) -> None:
+        """Push later arrivals back so none overtakes chunk ``start``."""
+        for i in range(max(start, 1), len(self.chunks)):
+            prev = self.chunks[i - 1].arrival
+            if self.chunks[i].arrival < prev:
+                self.chunks[i].arrival = prev
+
+    def head_arrival(self) -> float | None:
+        return self.chunks[0].arrival if self.chunks else None
+
+
+_LENGTHS = st.one_of(
+    st.sampled_from([SMALLEST_LENGTH, 40, 94, 95, 96, 128, 1000, MAX_PACKET_LENGTH]),
+    st.integers(SMALLEST_LENGTH, 600),
+)
+_DELAYS = st.sampled_from([0.0, 0.001, 0.02, 0.25, 1.3])
+_RATES = st.sampled_from([None, None, 300.0, 2400.0, 9600.0, 115200.0])
+_ENCODINGS = st.sampled_from([PRINTABLE, EIGHT_BIT_CLEAN])
+
+
+@st.composite
+def endpoint_configs(
+    draw: st.DrawFn, *, one_way_delay: float, line_rate: float | None
+) -> EndpointConfig:
+    """One side's configuration; the physical line (delay, rate) is shared."""
+    return EndpointConfig(
+        window=draw(st.integers(1, MAX_WINDOW)),
+        max_packet_length=draw(_LENGTHS),
+        encoding=draw(_ENCODINGS),
+        one_way_delay=one_way_delay,
+        line_rate=line_rate,
+        send_buffer=draw(st.one_of(st.integers(1, 64), st.integers(1, 8192), st.just(64 * 1024))),
+        receive_buffer=draw(st.integers(2 * MAX_PACKET_LENGTH, 3 * MAX_PACKET_LENGTH)),
+        dead_after=LIVENESS_TIMEOUT,
+        connect_timeout=LIVENESS_TIMEOUT,
+        linger=LINGER,
+    )
+
+
+_side = st.sampled_from(SIDES)
+_direction = st.sampled_from(DIRECTIONS)
+_index = st.integers(0, 1 << 16)
+"""Chunk positions are drawn wide and reduced modulo the queue length."""
+
+
+class ARQMachine(RuleBasedStateMachine):
+    """Two endpoints, a model wire, and the invariants described in the module doc."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.now = 0.0
+        self.ep: dict[str, Endpoint] = {}
+        self.lines: dict[str, Line] = {}
+        self.sent: dict[str, bytearray] = {s: bytearray() for s in SIDES}
+        self.received: dict[str, bytearray] = {s: bytearray() for s in SIDES}
+        self.events: dict[str, list[Event]] = {s: [] for s in SIDES}
+        self.healed = False
+        self._eof_called = dict.fromkeys(SIDES, False)
+
+    # -- plumbing ---------------------------------------------------------------------
+
+    @staticmethod
+    def _peer(side: str) -> str:
+        return "b" if side == "a" else "a"
+
+    @staticmethod
+    def _out_line(side: str) -> str:
+        return "ab" if side == "a" else "ba"
+
+    def _flush(self) -> None:
+        """Move what each endpoint wants to write onto its line, one chunk per packet,
+        and collect its events."""
+        for side in SIDES:
+            ep = self.ep[side]
+            for packet in split_packets(ep.data_to_send(self.now)):
+                self.lines[self._out_line(side)].transmit(self.now, packet)
+            self.events[side].extend(ep.events())
+
+    def _timers(self, side: str) -> list[float]:
+        """The protocol timer and the pacing (send) timer of one endpoint."""
+        ep = self.ep[side]
+        return [t for t in (ep.get_timer(), ep.get_send_timer()) if t is not None]
+
+    def _next_timer(self) -> float | None:
+        timers = [t for s in SIDES for t in self._timers(s)]
+        return min(timers) if timers else None
+
+    def _fire_timers_until(self, until: float) -> None:
+        """Fire every timer due at or before ``until``, in time order."""
+        spins = 0
+        while (timer := self._next_timer()) is not None and timer <= until:
+            if timer <= self.now:
+                spins += 1
+                assert spins <= TIMER_SPIN_LIMIT, (
+                    f"timer spin at t={self.now}: "
+                    f"{[(s, self.ep[s].state, self._timers(s)) for s in SIDES]}"
+                )
+            else:
+                spins = 0
+                self.now = timer
+            for side in SIDES:
+                due = self.ep[side].get_timer()
+                if due is not None and due <= self.now:
+                    self.ep[side].handle_timer(self.now)
+            self._flush()  # Also what a due send timer asks for.
+
+    def _deliver_head(self, direction: str) -> None:
+        """Let time run to the head chunk's arrival and hand it to the receiver."""
+        line = self.lines[direction]
+        self._fire_timers_until(line.chunks[0].arrival)
+        chunk = line.chunks.pop(0)
+        self.now = max(self.now, chunk.arrival)
+        receiver = self.ep["b" if direction == "ab" else "a"]
+        receiver.receive_data(chunk.data, self.now)
+        self._flush()
+
+    def _next_event_time(self) -> float | None:
+        times = [t for t in (self.lines[d].head_arrival() for d in DIRECTIONS) if t is not None]
+        timer = self._next_timer()
+        if timer is not None:
+            times.append(timer)
+        return min(times) if times else None
+
+    def _advance(self) -> bool:
+        """Process the single earliest event; False when nothing is pending."""
+        t = self._next_event_time()
+        if t is None:
+            return False
+        for direction in DIRECTIONS:
+            if self.lines[direction].head_arrival() == t:
+                self._deliver_head(direction)
+                return True
+        self._fire_timers_until(max(t, self.now))
+        return True
+
+    def _read_all(self) -> None:
+        for side in SIDES:
+            self.received[side] += self.ep[side].read(None, self.now)
+        self._flush()
+
+    def _can_send(self, side: str) -> bool:
+        ep = self.ep[side]
+        return (
+            ep.state not in (State.LINGER, State.CLOSED, State.FAILED, State.DEAD)
+            and not self._eof_called[side]
+        )
+
+    # -- set-up -----------------------------------------------------------------------
+
+    @initialize(
+        data=st.data(),
+        one_way_delay=_DELAYS,
+        line_rate=_RATES,
+    )
+    def setup(self, data: st.DataObject, one_way_delay: float, line_rate: float | None) -> None:
+        configs = {
+            side: data.draw(
+                endpoint_configs(one_way_delay=one_way_delay, line_rate=line_rate),
+                label=f"config_{side}",
+            )
+            for side in SIDES
+        }
+        self.ep = {side: Endpoint(configs[side]) for side in SIDES}
+        self.lines = {d: Line(delay=one_way_delay, rate=line_rate) for d in DIRECTIONS}
+        self.ep["b"].listen()
+        self.ep["a"].connect(self.now)
+        self._flush()
+
+    # -- choosing among what is possible ----------------------------------------------
+
+    def _senders(self) -> list[str]:
+        return [s for s in SIDES if self._can_send(s)]
+
+    def _closers(self) -> list[str]:
+        return [s for s in self._senders() if self.ep[s].all_acknowledged or not EOF_AFTER_ACKS]
+
+    def _busy_lines(self) -> list[str]:
+        return [d for d in DIRECTIONS if self.lines[d].chunks]
+
+    def _pick_line(self, data: st.DataObject) -> list[Chunk]:
+        direction = data.draw(st.sampled_from(self._busy_lines()), label="direction")
+        return self.lines[direction].chunks
+
+    # -- application ------------------------------------------------------------------
+
+    @precondition(lambda self: bool(self._senders()))
+    @rule(data=st.data(), payload=payloads())
+    def app_send(self, data: st.DataObject, payload: bytes) -> None:
+        side = data.draw(st.sampled_from(self._senders()), label="side")
+        ep = self.ep[side]
+        free = ep.send_buffer_free
+        taken = ep.send(payload, self.now)
+        assert taken == min(len(payload), free), (taken, len(payload), free)
+        self.sent[side] += payload[:taken]
+        self._flush()
+
+    @precondition(lambda self: bool(self._senders()))
+    @rule(
+        data=st.data(),
+        seed=st.integers(0, 2**32 - 1),
+        size=st.integers(1, 3 * MAX_PACKET_LENGTH),
+        compressible=st.booleans(),
+    )
+    def app_send_bulk(self, data: st.DataObject, seed: int, size: int, compressible: bool) -> None:
+        """Offer a large block (up to the receive buffer's size): fills send buffers
+        and, when the reader lags, closes the peer's advertised window."""
+        side = data.draw(st.sampled_from(self._senders()), label="side")
+        rng = random.Random(seed)
+        if compressible:
+            block = b"".join(bytes([rng.randrange(256)]) * rng.randrange(1, 500) for _ in range(64))
+            block = (block * (size // max(len(block), 1) + 1))[:size]
+        else:
+            block = rng.randbytes(size)
+        ep = self.ep[side]
+        free = ep.send_buffer_free
+        taken = ep.send(block, self.now)
+        assert taken == min(size, free), (taken, size, free)
+        self.sent[side] += block[:taken]
+        self._flush()
+
+    @rule(side=_side, n=st.one_of(st.none(), st.integers(0, 2000)))
+    def app_read(self, side: str, n: int | None) -> None:
+        before = self.ep[side].readable
+        got = self.ep[side].read(n, self.now)
+        assert len(got) == (before if n is None else min(n, before))
+        self.received[side] += got
+        self._flush()
+
+    @precondition(lambda self: bool(self._closers()))
+    @rule(data=st.data())
+    def half_close(self, data: st.DataObject) -> None:
+        side = data.draw(st.sampled_from(self._closers()), label="side")
+        self.ep[side].send_eof(self.now)
+        self._eof_called[side] = True
+        self._flush()
+
+    # -- time ---------------------------------------------------------------------------
+
+    def _soon(self, t: float | None) -> bool:
+        return t is not None and t <= IMPAIRMENT_HORIZON
+
+    def _deliverable(self) -> list[str]:
+        return [d for d in DIRECTIONS if self._soon(self.lines[d].head_arrival())]
+
+    @precondition(lambda self: self._soon(self._next_event_time()))
+    @rule()
+    def advance_time(self) -> None:
+        """Process the earliest pending event (a timer or an arrival)."""
+        self._advance()
+
+    @precondition(lambda self: bool(self._deliverable()))
+    @rule(data=st.data())
+    def deliver_next(self, data: st.DataObject) -> None:
+        """Deliver the head of a chosen line now, even if the other line's head is due
+        earlier (that one is simply later than it could have been)."""
+        direction = data.draw(st.sampled_from(self._deliverable()), label="direction")
+        self._deliver_head(direction)
+
+    # -- impairments (only before the line heals) -----------------------------------
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(data=st.data(), index=_index)
+    def drop(self, data: st.DataObject, index: int) -> None:
+        """Lose one chunk (a packet, or a piece of one after a split)."""
+        chunks = self._pick_line(data)
+        del chunks[index % len(chunks)]
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(data=st.data(), index=_index, start=_index, length=st.integers(1, 40))
+    def drop_bytes(self, data: st.DataObject, index: int, start: int, length: int) -> None:
+        """Lose a run of bytes inside one chunk (a UART overrun)."""
+        chunks = self._pick_line(data)
+        pos = index % len(chunks)
+        chunk = chunks[pos]
+        cut = start % len(chunk.data)
+        chunk.data = chunk.data[:cut] + chunk.data[cut + length :]
+        if not chunk.data:
+            del chunks[pos]
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(data=st.data(), index=_index, bit=st.integers(0, 1 << 20))
+    def corrupt(self, data: st.DataObject, index: int, bit: int) -> None:
+        """Flip one bit of one chunk."""
+        chunks = self._pick_line(data)
+        chunk = chunks[index % len(chunks)]
+        if chunk.data:
+            bit %= 8 * len(chunk.data)
+            damaged = bytearray(chunk.data)
+            damaged[bit // 8] ^= 1 << (bit % 8)
+            chunk.data = bytes(damaged)
+
+    @precondition(lambda self: not self.healed)
+    @rule(
+        direction=_direction,
+        index=_index,
+        garbage=st.one_of(
+            st.binary(min_size=1, max_size=64),
+            st.lists(st.sampled_from(list(_SPECIAL)), min_size=1, max_size=16).map(bytes),
+        ),
+    )
+    def insert_garbage(self, direction: str, index: int, garbage: bytes) -> None:
+        """Line noise between (or, after a split, inside) packets."""
+        line = self.lines[direction]
+        chunks = line.chunks
+        pos = index % (len(chunks) + 1)
+        if pos < len(chunks):
+            arrival = chunks[pos].arrival
+        elif chunks:
+            arrival = chunks[-1].arrival
+        else:
+            arrival = self.now + line.delay
+        chunks.insert(pos, Chunk(arrival, garbage))
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(data=st.data(), index=_index)
+    def duplicate(self, data: st.DataObject, index: int) -> None:
+        """Deliver a chunk twice in a row (never later: see the module doc)."""
+        chunks = self._pick_line(data)
+        pos = index % len(chunks)
+        chunks.insert(pos + 1, Chunk(chunks[pos].arrival, chunks[pos].data))
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(
+        data=st.data(), index=_index, cut=_index, lag=st.sampled_from([0.0, 0.001, 0.1, 1.0, 5.0])
+    )
+    def split(self, data: st.DataObject, index: int, cut: int, lag: float) -> None:
+        """Cut a chunk in two reads, the second ``lag`` seconds after the first."""
+        direction = data.draw(st.sampled_from(self._busy_lines()), label="direction")
+        line = self.lines[direction]
+        pos = index % len(line.chunks)
+        chunk = line.chunks[pos]
+        if len(chunk.data) >= 2:
+            at = 1 + cut % (len(chunk.data) - 1)
+            line.chunks[pos : pos + 1] = [
+                Chunk(chunk.arrival, chunk.data[:at]),
+                Chunk(chunk.arrival + lag, chunk.data[at:]),
+            ]
+            line.restore_order(pos + 1)
+
+    @precondition(lambda self: not self.healed and bool(self._busy_lines()))
+    @rule(
+        data=st.data(),
+        index=_index,
+        seconds=st.sampled_from([0.001, 0.05, 0.5, 2.0, 10.0, 60.0]),
+    )
+    def delay(self, data: st.DataObject, index: int, seconds: float) -> None:
+        """Hold one chunk back (and, since the line never reorders, all behind it)."""
+        direction = data.draw(st.sampled_from(self._busy_lines()), label="direction")
+        line = self.lines[direction]
+        pos = index % len(line.chunks)
+        line.chunks[pos].arrival += seconds
+        line.restore_order(pos)
+
+    # -- invariants --------------------------------------------------------------------
+
+    @invariant()
+    def delivered_is_prefix_of_sent(self) -> None:
+        for side in SIDES:
+            got, sent = self.received[side], self.sent[self._peer(side)]
+            assert got == sent[: len(got)], (
+                f"{side} read bytes the peer never sent at offset "
+                f"{_first_difference(got, sent)} (read {len(got)}, peer sent {len(sent)})"
+            )
+
+    @invariant()
+    def end_of_stream_means_everything_arrived(self) -> None:
+        for side in SIDES:
+            if any(isinstance(e, EndOfStream) for e in self.events[side]):
+                peer = self._peer(side)
+                assert self._eof_called[peer], f"{side} saw EOF that {peer} never sent"
+                stats = self.ep[side].statistics()
+                assert stats.bytes_delivered == len(self.sent[peer]), (
+                    f"{side} saw EOF after {stats.bytes_delivered} of {len(self.sent[peer])} bytes"
+                )
+            if self.ep[side].at_eof:
+                assert self.received[side] == self.sent[self._peer(side)]
+
+    @invariant()
+    def connection_stays_alive(self) -> None:
+        for side in SIDES:
+            assert self.ep[side].state not in (State.FAILED, State.DEAD), (
+                side,
+                self.ep[side].state,
+                self.events[side],
+            )
+            bad = [e for e in self.events[side] if isinstance(e, ConnectionAborted | LinkDead)]
+            assert not bad, (side, bad)
+            for kind in (Connected, EndOfStream, ConnectionClosed):
+                assert sum(isinstance(e, kind) for e in self.events[side]) <= 1, (
+                    side,
+                    self.events[side],
+                )
+
+    @invariant()
+    def accounting_is_consistent(self) -> None:
+        for side in SIDES:
+            stats = self.ep[side].statistics()
+            assert stats.bytes_delivered == len(self.received[side]) + self.ep[side].readable
+            assert stats.bytes_acknowledged <= len(self.sent[side])
+            if self.ep[side].all_acknowledged and self.ep[side].state is not State.IDLE:
+                # Acknowledgements never lie: once every packet is acknowledged, the
+                # peer holds all of them, hence has delivered every byte in order.
+                # (A selective ACK alone proves less: the packet may wait, buffered,
+                # behind a gap, so bytes_acknowledged may exceed bytes_delivered.)
+                peer = self.ep[self._peer(side)].statistics()
+                assert peer.bytes_delivered == len(self.sent[side]), (
+                    side,
+                    peer.bytes_delivered,
+                    len(self.sent[side]),
+                )
+
+    # -- the end: heal, close, check everything arrived ------------------------------
+
+    def teardown(self) -> None:
+        if not self.ep:
+            return  # set-up itself failed: that error is the report.
+        self.finish()
+
+    def finish(self) -> None:
+        """Heal the line, half-close both sides, and run until both are CLOSED."""
+        self.healed = True
+        start = self.now
+        last_progress, idle = self._progress(), 0
+        for _ in range(FINISH_MAX_EVENTS):
+            for side in self._closers():
+                self.ep[side].send_eof(self.now)
+                self._eof_called[side] = True
+            self._read_all()
+            self.check_all()
+            if all(self.ep[s].state is State.CLOSED for s in SIDES):
+                break
+            assert self._advance(), f"nothing pending but not closed: {self._describe()}"
+            assert self.now - start <= FINISH_MAX_SECONDS, f"too slow: {self._describe()}"
+            progress = self._progress()
+            idle = 0 if progress != last_progress else idle + 1
+            last_progress = progress
+            assert idle < FINISH_STALL_EVENTS, f"stuck after healing: {self._describe()}"
+        else:
+            raise AssertionError(f"no clean close after healing: {self._describe()}")
+        for side in SIDES:
+            peer = self._peer(side)
+            assert self.received[side] == self.sent[peer]
+            assert self.ep[side].at_eof
+            assert self.ep[side].all_acknowledged
+            kinds = [type(e) for e in self.events[side]]
+            assert kinds == [Connected, EndOfStream, ConnectionClosed], (side, kinds)
+
+    def _progress(self) -> tuple[object, ...]:
+        """What changes whenever the connection moves forward."""
+        out: list[object] = []
+        for side in SIDES:
+            stats = self.ep[side].statistics()
+            out += [
+                stats.state,
+                stats.send_base,
+                stats.receive_expected,
+                stats.bytes_delivered,
+                stats.bytes_acknowledged,
+                len(self.events[side]),
+            ]
+        return tuple(out)
+
+    def check_all(self) -> None:
+        """Every invariant, for use outside hypothesis's own invariant checks."""
+        self.delivered_is_prefix_of_sent()
+        self.end_of_stream_means_everything_arrived()
+        self.connection_stays_alive()
+        self.accounting_is_consistent()
+
+    def _describe(self) -> str:
+        parts = [f"t={self.now:.3f}"]
+        for side in SIDES:
+            ep = self.ep[side]
+            parts.append(
+                f"{side}: {ep.state.value} timers={self._timers(side)} "
+                f"sent={len(self.sent[side])} read={len(self.received[side])} "
+                f"events={[type(e).__name__ for e in self.events[side]]} {ep.statistics()}"
+            )
+        for d in DIRECTIONS:
+            parts.append(f"line {d}: {len(self.lines[d].chunks)} chunks")
+        return "\n".join(parts)
+
+
+def _first_difference(a: bytes | bytearray, b: bytes | bytearray) -> int:
+    for i, (x, y) in enumerate(zip(a, b, strict=False)):
+        if x != y:
+            return i
+    return min(len(a), len(b))

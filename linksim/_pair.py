@@ -1,0 +1,81 @@
+"""``serial_socket_pair``: two connected serial sockets over the in-memory impaired link.
+
+The endpoints are told the physics of the line they run on (one-way delay and
+line rate of the a-to-b direction), so their timers, pacing and window bound
+match it, as a user would configure them for a real line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import trio
+
+from serialsocket import EndpointConfig, SerialSocket, connect, listen
+
+from ._channel import open_impaired_link
+from ._config import LinkConfig
+
+__all__ = ["endpoint_config_for", "serial_socket_pair"]
+
+
+def endpoint_config_for(link: LinkConfig, **overrides: Any) -> EndpointConfig:
+    """An endpoint configuration matching the line: its delay and rate, plus overrides."""
+    d = link.a_to_b
+    base = EndpointConfig(
+        one_way_delay=d.delay + d.jitter, line_rate=d.rate, bits_per_char=d.bits_per_char
+    )
+    return dataclasses.replace(base, **overrides)
+
+
+@asynccontextmanager
+async def serial_socket_pair(
+    config: LinkConfig | str = "clean",
+    *,
+    seed: int = 0,
+    endpoint: EndpointConfig | None = None,
+    read_latency: float | None = None,
+) -> AsyncIterator[tuple[SerialSocket, SerialSocket]]:
+    """``async with serial_socket_pair("noisy-moon", seed=1) as (client, server):``.
+
+    Args:
+        config: a :class:`LinkConfig` or a preset name.
+        seed: the impairment seed when ``config`` is a preset name.
+        endpoint: endpoint configuration for both sides; default derived from
+            the line by :func:`endpoint_config_for`.
+        read_latency: see :func:`~linksim.open_impaired_link`.  Default: 16
+            character times on a rate-limited line (what a UART's FIFO timeout
+            does; one wake-up per byte would make long simulations slow), else 0.
+
+    Yields:
+        ``(client, server)``: the client connected, the server accepted.
+        Both are closed on exit (gracefully if possible).
+    """
+    link = LinkConfig.preset(config, seed=seed) if isinstance(config, str) else config
+    ep_cfg = endpoint or endpoint_config_for(link)
+    if read_latency is None:
+        read_latency = 16 * link.a_to_b.char_time
+    async with (
+        open_impaired_link(link, read_latency=read_latency) as (port_a, port_b),
+        trio.open_nursery() as nursery,
+        listen(port_b, ep_cfg) as listener,
+    ):
+        accepted: list[SerialSocket] = []
+
+        async def accept() -> None:
+            accepted.append(await listener.accept())
+
+        async with trio.open_nursery() as handshake:
+            handshake.start_soon(accept)
+            client = await connect(port_a, ep_cfg, nursery=nursery)
+        server = accepted[0]
+        try:
+            yield client, server
+        finally:
+            with trio.CancelScope(shield=True):
+                async with trio.open_nursery() as closing:
+                    closing.start_soon(client.aclose)
+                    closing.start_soon(server.aclose)

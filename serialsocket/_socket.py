@@ -1,0 +1,650 @@
+"""SerialSocket: a trio ``HalfCloseableStream`` running the ARQ endpoint over a port.
+
+Theory of operation
+-------------------
+A *driver* owns one port (any ``trio.abc.Stream``: a pty or serial device
+wrapped by ``open_port``, an in-memory impaired link, a TCP stream) and one
+sans-I/O :class:`~serialsocket.Endpoint`.  Three tasks move bytes and time:
+
+* the reader feeds everything read from the port into the endpoint;
+* the writer sends whatever the endpoint releases, waking on any change or
+  on the endpoint's pacing timer (``get_send_timer``);
+* the timer task calls ``handle_timer`` at ``get_timer()``.
+
+After any of these, waiters are woken through one "something changed" event,
+and every waiter re-checks its own condition (no lost wake-ups: trio is
+single-threaded, and a waiter takes the event before it awaits it).
+
+A :class:`SerialSocket` is a *session* on a driver.  A client's session owns
+the port and closes it on ``aclose``.  A listener's sessions share the port:
+when one closes, the endpoint resets and listens again (seed 003: "the
+manipulator will reset and listen for further connection requests").
+
+Failures reach the application as ``trio.BrokenResourceError`` whose
+``__cause__`` says what happened: :class:`PeerAborted` (the peer sent an E
+packet, with its reason), :class:`LinkDeadError` (silence; with the bytes
+acknowledged, in flight and never sent) or :class:`LineFailed` (the port
+itself failed or reached EOF).
+"""
+
+from __future__ import annotations
+
+import logging
+import operator
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+
+import trio
+
+from ._config import EndpointConfig
+from ._endpoint import Endpoint, EndpointStatistics
+from ._errors import LocalProtocolError
+from ._events import ConnectionAborted, LinkDead
+from ._state import TERMINAL, State
+
+__all__ = [
+    "LineFailed",
+    "LinkBroken",
+    "LinkDeadError",
+    "PeerAborted",
+    "SerialListener",
+    "SerialSocket",
+    "SocketStatistics",
+    "accept",
+    "connect",
+    "listen",
+    "open_serial_socket",
+    "serve",
+]
+
+log = logging.getLogger(__name__)
+
+_READ_SIZE = 65536
+"""Bytes asked of the port per read: one read can hold many packets."""
+
+_FLUSH_GRACE = 0.5
+"""Seconds (plus the line time of what is pending) allowed to push out a last
+E or ACK when a session is torn down; a local I/O bound, not a protocol timer."""
+
+
+class LinkBroken(Exception):
+    """Base of the causes chained to ``BrokenResourceError``."""
+
+
+class PeerAborted(LinkBroken):
+    """The peer ended the connection with an E packet.
+
+    Attributes:
+        reason: the peer's text.
+    """
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(f"the peer aborted the connection: {reason}")
+        self.reason = reason
+
+
+class LinkDeadError(LinkBroken):
+    """The peer fell silent for longer than ``dead_after``.
+
+    Attributes:
+        report: the endpoint's LinkDead event (bytes acknowledged, in flight,
+            never sent).
+    """
+
+    def __init__(self, report: LinkDead) -> None:
+        super().__init__(
+            f"link dead after {report.silence:.1f} s of silence: "
+            f"{report.bytes_acknowledged} bytes acknowledged, "
+            f"{report.bytes_in_flight} in flight (may or may not have arrived), "
+            f"{report.bytes_unsent} never sent"
+        )
+        self.report = report
+
+
+class LineFailed(LinkBroken):
+    """The port failed or reached EOF (the device went away, the relay stopped)."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SocketStatistics:
+    """The ARQ record plus what the port saw.
+
+    Attributes:
+        link: the endpoint's statistics.
+        port_reads: read calls that returned data.
+        port_writes: write calls.
+        port_bytes_in: bytes read from the port.
+        port_bytes_out: bytes written to the port.
+    """
+
+    link: EndpointStatistics
+    port_reads: int
+    port_writes: int
+    port_bytes_in: int
+    port_bytes_out: int
+
+
+class _Driver:
+    """One port, one endpoint, three tasks (see the module docstring)."""
+
+    def __init__(self, port: trio.abc.Stream, endpoint: Endpoint, *, owns_port: bool) -> None:
+        self.port = port
+        self.ep = endpoint
+        self.owns_port = owns_port
+        self.generation = 0
+        self.broken: LinkBroken | None = None
+        self._changed = trio.Event()
+        self._cancel = trio.CancelScope()
+        self._stopped = trio.Event()
+        self._writer_idle = True
+        self.reads = self.writes = self.bytes_in = self.bytes_out = 0
+
+    # -- change notification ----------------------------------------------------
+
+    def notify(self) -> None:
+        """Wake every waiter; each re-checks its own condition."""
+        self._changed.set()
+        self._changed = trio.Event()
+
+    async def changed(self) -> None:
+        """Wait for the next :meth:`notify`."""
+        await self._changed.wait()
+
+    def now(self) -> float:
+        return trio.current_time()
+
+    def after_input(self) -> None:
+        """Collect endpoint events that end the connection, then wake waiters."""
+        for event in self.ep.events():
+            if isinstance(event, ConnectionAborted) and event.by_peer and self.broken is None:
+                self.broken = PeerAborted(event.reason)
+            elif isinstance(event, LinkDead) and self.broken is None:
+                self.broken = LinkDeadError(event)
+            log.debug("endpoint event: %s", event)
+        self.notify()
+
+    def fail(self, cause: LinkBroken) -> None:
+        if self.broken is None:
+            self.broken = cause
+        self.notify()
+
+    # -- tasks ------------------------------------------------------------------
+
+    async def run(self, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED) -> None:
+        """Run the three tasks until :meth:`stop` (never raises port errors)."""
+        try:
+            with self._cancel:
+                async with trio.open_nursery() as nursery:
+                    nursery.start_soon(self._reader)
+                    nursery.start_soon(self._writer)
+                    nursery.start_soon(self._timer)
+                    task_status.started()
+        finally:
+            self._stopped.set()
+            self.notify()
+
+    async def _reader(self) -> None:
+        while True:
+            try:
+                data = await self.port.receive_some(_READ_SIZE)
+            except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
+                cause = LineFailed(f"reading the line failed: {exc!r}")
+                cause.__cause__ = exc
+                self.fail(cause)
+                return
+            if not data:
+                self.fail(LineFailed("the line reached EOF: the other end of the port closed"))
+                return
+            self.reads += 1
+            self.bytes_in += len(data)
+            self.ep.receive_data(data, self.now())
+            self.after_input()
+
+    async def _writer(self) -> None:
+        while True:
+            data = self.ep.data_to_send(self.now())
+            if data:
+                self._writer_idle = False
+                try:
+                    await self.port.send_all(data)
+                except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
+                    cause = LineFailed(f"writing to the line failed: {exc!r}")
+                    cause.__cause__ = exc
+                    self.fail(cause)
+                    return
+                self.writes += 1
+                self.bytes_out += len(data)
+                continue
+            self._writer_idle = True
+            self.notify()
+            wake = self.ep.get_send_timer()
+            changed = self._changed
+            if wake is None:
+                await changed.wait()
+            else:
+                # Never closer than a millisecond: a wake time at or before
+                # now with nothing released would otherwise spin.
+                with trio.move_on_at(max(wake, self.now() + 1e-3)):
+                    await changed.wait()
+
+    async def _timer(self) -> None:
+        while True:
+            deadline = self.ep.get_timer()
+            changed = self._changed
+            now = self.now()
+            if deadline is None:
+                await changed.wait()
+            elif deadline > now:
+                with trio.move_on_at(deadline):
+                    await changed.wait()
+            else:
+                self.ep.handle_timer(now)
+                self.after_input()
+                await trio.lowlevel.checkpoint()
+
+    # -- teardown -----------------------------------------------------------------
+
+    async def flush(self) -> None:
+        """Give the writer a bounded moment to push out what is pending (shielded)."""
+        with trio.CancelScope(shield=True):
+            pending = self.ep.statistics().line_backlog
+            with trio.move_on_after(_FLUSH_GRACE + pending):
+                self.notify()
+                await trio.lowlevel.checkpoint()
+                while not self._writer_idle and self.broken is None and not self._stopped.is_set():
+                    await self.changed()
+
+    async def stop(self) -> None:
+        """Stop the tasks and close the port if it is ours (prompt; shielded)."""
+        self._cancel.cancel()
+        with trio.CancelScope(shield=True):
+            if self.owns_port:
+                await trio.aclose_forcefully(self.port)
+
+
+class SerialSocket(trio.abc.HalfCloseableStream):
+    """A connected serial socket: reliable, sequenced, full duplex.
+
+    Obtain one from :func:`connect`, :func:`open_serial_socket` or
+    :meth:`SerialListener.accept`.  Semantics follow ``trio.abc``:
+    ``receive_some`` returns ``b""`` only at the peer's EOF; after
+    ``send_eof`` the peer sees EOF once every byte before it arrived;
+    ``aclose`` closes gracefully (bounded by ``close_timeout``) and, if
+    cancelled, aborts.
+    """
+
+    def __init__(self, driver: _Driver, *, close_timeout: float) -> None:
+        self._d = driver
+        self._generation = driver.generation
+        self._closed = False
+        self._eof_sent = False
+        self._sending = False
+        self._receiving = False
+        self.close_timeout = close_timeout
+
+    @property
+    def endpoint(self) -> Endpoint:
+        """The sans-I/O endpoint underneath (for inspection)."""
+        return self._d.ep
+
+    def statistics(self) -> SocketStatistics:
+        """The ARQ statistics and the port counters."""
+        d = self._d
+        return SocketStatistics(
+            link=d.ep.statistics(),
+            port_reads=d.reads,
+            port_writes=d.writes,
+            port_bytes_in=d.bytes_in,
+            port_bytes_out=d.bytes_out,
+        )
+
+    # -- checks -----------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed or self._generation != self._d.generation:
+            raise trio.ClosedResourceError("this serial socket was closed")
+
+    def _raise_if_broken(self) -> None:
+        d = self._d
+        if d.broken is not None:
+            raise trio.BrokenResourceError(str(d.broken)) from d.broken
+        if d.ep.state in (State.FAILED, State.DEAD):
+            cause = LineFailed(f"the connection ended ({d.ep.state.value})")
+            raise trio.BrokenResourceError(str(cause)) from cause
+
+    # -- stream API ---------------------------------------------------------------
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        """Queue all of ``data`` for reliable delivery; returns once it is queued.
+
+        Raises:
+            trio.BusyResourceError: another task is already sending.
+            trio.ClosedResourceError: this socket was closed or ``send_eof``
+                was called.
+            trio.BrokenResourceError: the connection failed (see the cause).
+        """
+        if self._sending:
+            raise trio.BusyResourceError("another task is already sending on this socket")
+        self._sending = True
+        try:
+            self._check_open()
+            if self._eof_sent:
+                raise trio.ClosedResourceError("send_eof() was already called")
+            await trio.lowlevel.checkpoint()
+            view = memoryview(data).cast("B")
+            while True:
+                self._check_open()
+                self._raise_if_broken()
+                if view:
+                    try:
+                        taken = self._d.ep.send(view, self._d.now())
+                    except LocalProtocolError as exc:
+                        raise trio.BrokenResourceError(str(exc)) from exc
+                    if taken:
+                        view = view[taken:]
+                        self._d.notify()
+                if not view:
+                    return
+                await self._d.changed()
+        finally:
+            self._sending = False
+
+    async def wait_send_all_might_not_block(self) -> None:
+        """Wait until the send buffer has room (or the socket failed)."""
+        if self._sending:
+            raise trio.BusyResourceError("another task is already sending on this socket")
+        self._sending = True
+        try:
+            await trio.lowlevel.checkpoint()
+            while True:
+                self._check_open()
+                if self._d.broken is not None or self._d.ep.send_buffer_free > 0:
+                    return
+                await self._d.changed()
+        finally:
+            self._sending = False
+
+    async def send_eof(self) -> None:
+        """Half-close: the peer reads EOF after every byte sent so far."""
+        if self._sending:
+            raise trio.BusyResourceError("another task is already sending on this socket")
+        self._sending = True
+        try:
+            self._check_open()
+            await trio.lowlevel.checkpoint()
+            if self._eof_sent:
+                return
+            self._raise_if_broken()
+            self._eof_sent = True
+            self._d.ep.send_eof(self._d.now())
+            self._d.notify()
+        finally:
+            self._sending = False
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        """Bytes from the peer, in order, each exactly once; ``b""`` only at EOF.
+
+        Raises:
+            trio.BusyResourceError: another task is already receiving.
+            trio.ClosedResourceError: this socket was closed (also wakes a
+                blocked receive).
+            trio.BrokenResourceError: the connection failed (see the cause);
+                bytes delivered before the failure are returned first.
+        """
+        if max_bytes is not None:
+            max_bytes = operator.index(max_bytes)  # TypeError for 1.5, as trio requires
+            if max_bytes < 1:
+                raise ValueError("max_bytes must be >= 1")
+        if self._receiving:
+            raise trio.BusyResourceError("another task is already receiving on this socket")
+        self._receiving = True
+        try:
+            self._check_open()
+            await trio.lowlevel.checkpoint()
+            while True:
+                self._check_open()
+                data = self._d.ep.read(max_bytes or _READ_SIZE, self._d.now())
+                if data:
+                    self._d.notify()  # a window update may be due
+                    return data
+                if self._d.ep.at_eof:
+                    return b""
+                self._raise_if_broken()
+                await self._d.changed()
+        finally:
+            self._receiving = False
+
+    async def aclose(self) -> None:
+        """Close gracefully: all our data delivered, both EOFs exchanged.
+
+        Bounded by ``close_timeout``; then, or if cancelled, the connection is
+        aborted with an E packet.  Idempotent.
+        """
+        if self._closed:
+            await trio.lowlevel.checkpoint()
+            return
+        self._closed = True
+        d = self._d
+        d.notify()  # wake our own blocked receive/send: they now raise Closed
+        try:
+            await trio.lowlevel.checkpoint()
+            if d.ep.state is State.ESTABLISHED and d.broken is None:
+                d.ep.close(d.now())
+                d.notify()
+                with trio.move_on_after(self.close_timeout):
+                    while d.ep.state is State.ESTABLISHED and d.broken is None:
+                        await d.changed()
+            if d.ep.state is State.ESTABLISHED:
+                d.ep.abort("close timed out: the peer did not finish closing", d.now())
+        except trio.Cancelled:
+            if d.ep.state not in TERMINAL:
+                d.ep.abort("connection closed by the application", d.now())
+            raise
+        finally:
+            await d.flush()
+            if d.owns_port:
+                await d.stop()
+            else:
+                d.notify()
+
+
+class SerialListener(trio.abc.Listener[SerialSocket]):
+    """Accepts one connection at a time on a port; resets and listens after each."""
+
+    def __init__(self, driver: _Driver, *, close_timeout: float) -> None:
+        self._d = driver
+        self._close_timeout = close_timeout
+        self._session: SerialSocket | None = None
+        self._closed = False
+
+    @property
+    def endpoint(self) -> Endpoint:
+        """The sans-I/O endpoint underneath (for inspection)."""
+        return self._d.ep
+
+    async def accept(self) -> SerialSocket:
+        """Wait for the next connection.
+
+        While the current session's connection is live, this waits for it to
+        end.  When a connection has ended (closed, aborted, dead), the
+        endpoint resets and listens again; a session object from it that was
+        not closed raises ClosedResourceError from then on.
+
+        Raises:
+            trio.ClosedResourceError: the listener was closed.
+            trio.BrokenResourceError: the port itself failed.
+        """
+        await trio.lowlevel.checkpoint()
+        d = self._d
+        while True:
+            if self._closed:
+                raise trio.ClosedResourceError("listener closed")
+            if isinstance(d.broken, LineFailed):
+                raise trio.BrokenResourceError(str(d.broken)) from d.broken
+            state = d.ep.state
+            current = self._session is not None and self._session._generation == d.generation
+            if state is State.ESTABLISHED and not current:
+                self._session = SerialSocket(d, close_timeout=self._close_timeout)
+                return self._session
+            if state in TERMINAL:
+                d.ep.reset()
+                d.ep.listen()
+                d.generation += 1
+                d.broken = None
+                d.notify()
+                continue
+            await d.changed()
+
+    async def aclose(self) -> None:
+        """Stop listening, end any session, and close the port."""
+        if self._closed:
+            await trio.lowlevel.checkpoint()
+            return
+        self._closed = True
+        if self._d.ep.state not in TERMINAL and self._d.ep.state is not State.IDLE:
+            self._d.ep.abort("listener closed", self._d.now())
+            await self._d.flush()
+        self._d.owns_port = True
+        await self._d.stop()
+
+
+def _close_timeout(config: EndpointConfig) -> float:
+    """How long aclose waits for the peer: a dead-link interval (derived from the physics)."""
+    return config.derived_dead_after()
+
+
+async def connect(
+    port: trio.abc.Stream,
+    config: EndpointConfig | None = None,
+    *,
+    nursery: trio.Nursery | None = None,
+) -> SerialSocket:
+    """Connect over ``port`` and return the socket (the port now belongs to it).
+
+    The driver runs in ``nursery`` when given, else as a trio system task (it
+    stops when the socket is closed).
+
+    Raises:
+        ConnectionRefusedError: the peer refused, with its reason.
+        TimeoutError: no answer within the connect timeout.
+        trio.BrokenResourceError: the port failed while connecting.
+    """
+    cfg = config or EndpointConfig()
+    driver = _Driver(port, Endpoint(cfg), owns_port=True)
+    if nursery is not None:
+        await nursery.start(driver.run)
+    else:
+        trio.lowlevel.spawn_system_task(driver.run)
+    driver.ep.connect(driver.now())
+    driver.notify()
+    try:
+        while True:
+            state = driver.ep.state
+            if state is State.ESTABLISHED:
+                return SerialSocket(driver, close_timeout=_close_timeout(cfg))
+            if state in TERMINAL:
+                raise _connect_error(driver)
+            if driver.broken is not None:
+                raise trio.BrokenResourceError(str(driver.broken)) from driver.broken
+            await driver.changed()
+    except BaseException:
+        await driver.flush()
+        await driver.stop()
+        raise
+
+
+async def accept(
+    port: trio.abc.Stream,
+    config: EndpointConfig | None = None,
+    *,
+    nursery: trio.Nursery | None = None,
+) -> SerialSocket:
+    """Wait for one connection on ``port`` and return it (the port now belongs to it).
+
+    For a server that accepts connection after connection on the same port,
+    use :func:`listen` or :func:`serve` instead.
+
+    Raises:
+        trio.BrokenResourceError: the port failed while listening.
+    """
+    cfg = config or EndpointConfig()
+    driver = _Driver(port, Endpoint(cfg), owns_port=True)
+    if nursery is not None:
+        await nursery.start(driver.run)
+    else:
+        trio.lowlevel.spawn_system_task(driver.run)
+    driver.ep.listen()
+    try:
+        while driver.ep.state is not State.ESTABLISHED:
+            if driver.broken is not None:
+                raise trio.BrokenResourceError(str(driver.broken)) from driver.broken
+            await driver.changed()
+        return SerialSocket(driver, close_timeout=_close_timeout(cfg))
+    except BaseException:
+        await driver.stop()
+        raise
+
+
+def _connect_error(driver: _Driver) -> Exception:
+    if isinstance(driver.broken, PeerAborted):
+        return ConnectionRefusedError(f"connection refused: {driver.broken.reason}")
+    return TimeoutError(
+        f"no answer to connect within {driver.ep.config.derived_connect_timeout():.1f} s: "
+        "is the other side listening, and are the line settings right?"
+    )
+
+
+@asynccontextmanager
+async def open_serial_socket(
+    port: trio.abc.Stream, config: EndpointConfig | None = None
+) -> AsyncIterator[SerialSocket]:
+    """``async with open_serial_socket(port) as sock:`` -- connect, use, close."""
+    async with trio.open_nursery() as nursery:
+        sock = await connect(port, config, nursery=nursery)
+        try:
+            yield sock
+        finally:
+            await sock.aclose()
+
+
+@asynccontextmanager
+async def listen(
+    port: trio.abc.Stream, config: EndpointConfig | None = None
+) -> AsyncIterator[SerialListener]:
+    """``async with listen(port) as listener: sock = await listener.accept()``."""
+    cfg = config or EndpointConfig()
+    driver = _Driver(port, Endpoint(cfg), owns_port=False)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(driver.run)
+        driver.ep.listen()
+        listener = SerialListener(driver, close_timeout=_close_timeout(cfg))
+        try:
+            yield listener
+        finally:
+            await listener.aclose()
+
+
+async def serve(
+    port: trio.abc.Stream,
+    handler: Callable[[SerialSocket], Awaitable[object]],
+    config: EndpointConfig | None = None,
+    *,
+    task_status: trio.TaskStatus[SerialListener] = trio.TASK_STATUS_IGNORED,
+) -> None:
+    """Serve connections on ``port`` one after another, forever (cancel to stop).
+
+    Each connection is handed to ``handler`` and closed when it returns; then
+    the endpoint resets and listens for the next.  An exception from the
+    handler for one connection is logged and does not stop the server.
+    """
+    async with listen(port, config) as listener:
+        task_status.started(listener)
+        while True:
+            sock = await listener.accept()
+            try:
+                await handler(sock)
+            except (trio.BrokenResourceError, trio.ClosedResourceError, LinkBroken) as exc:
+                log.info("connection ended: %s", exc)
+            finally:
+                await sock.aclose()
