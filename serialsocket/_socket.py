@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import logging
 import operator
-from collections.abc import AsyncIterator, Awaitable, Callable
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
 
 import trio
@@ -301,6 +301,17 @@ class SerialSocket(trio.abc.HalfCloseableStream):
 
     # -- checks -----------------------------------------------------------------
 
+    @contextmanager
+    def _send_guard(self) -> Iterator[None]:
+        """One sending task at a time (trio's BusyResourceError contract)."""
+        if self._sending:
+            raise trio.BusyResourceError("another task is already sending on this socket")
+        self._sending = True
+        try:
+            yield
+        finally:
+            self._sending = False
+
     def _check_open(self) -> None:
         if self._closed or self._generation != self._d.generation:
             raise trio.ClosedResourceError("this serial socket was closed")
@@ -324,10 +335,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 was called.
             trio.BrokenResourceError: the connection failed (see the cause).
         """
-        if self._sending:
-            raise trio.BusyResourceError("another task is already sending on this socket")
-        self._sending = True
-        try:
+        with self._send_guard():
             self._check_open()
             if self._eof_sent:
                 raise trio.ClosedResourceError("send_eof() was already called")
@@ -347,30 +355,20 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 if not view:
                     return
                 await self._d.changed()
-        finally:
-            self._sending = False
 
     async def wait_send_all_might_not_block(self) -> None:
         """Wait until the send buffer has room (or the socket failed)."""
-        if self._sending:
-            raise trio.BusyResourceError("another task is already sending on this socket")
-        self._sending = True
-        try:
+        with self._send_guard():
             await trio.lowlevel.checkpoint()
             while True:
                 self._check_open()
                 if self._d.broken is not None or self._d.ep.send_buffer_free > 0:
                     return
                 await self._d.changed()
-        finally:
-            self._sending = False
 
     async def send_eof(self) -> None:
         """Half-close: the peer reads EOF after every byte sent so far."""
-        if self._sending:
-            raise trio.BusyResourceError("another task is already sending on this socket")
-        self._sending = True
-        try:
+        with self._send_guard():
             self._check_open()
             await trio.lowlevel.checkpoint()
             if self._eof_sent:
@@ -379,8 +377,6 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self._eof_sent = True
             self._d.ep.send_eof(self._d.now())
             self._d.notify()
-        finally:
-            self._sending = False
 
     async def receive_some(self, max_bytes: int | None = None) -> bytes:
         """Bytes from the peer, in order, each exactly once; ``b""`` only at EOF.
