@@ -190,7 +190,13 @@ class LinkDirection:
 
     def pending(self) -> int:
         """Bytes accepted but not yet delivered (in flight, plus any held back)."""
-        return self._in_flight + len(self._held)
+        # Counted from the delivery queue itself, not from a running counter:
+        # EOF delivery waits for this to reach zero, so it must be exact.
+        return self._queued_bytes() + len(self._held)
+
+    def _queued_bytes(self) -> int:
+        """Bytes decided and queued for delivery but not yet received."""
+        return sum(len(seg.data) - seg.offset for seg in self._segments)
 
     def in_outage(self, now: float) -> bool:
         """True while a scheduled outage cuts the signal at ``now``."""
@@ -205,7 +211,7 @@ class LinkDirection:
     def statistics(self) -> DirectionStatistics:
         """A snapshot of the counters."""
         c = self._counts
-        c["bytes_in_flight"] = self._in_flight
+        c["bytes_in_flight"] = self._queued_bytes()
         c["bytes_held"] = len(self._held)
         c["bytes_dropped"] = (
             c["dropped_outage"] + c["dropped_scripted"] + c["dropped_burst"] + c["dropped_loss"]

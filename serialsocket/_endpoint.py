@@ -705,6 +705,10 @@ class Endpoint:
             self._counters["out_of_window"] += 1
         elif kind == "full":
             self._counters["dropped_buffer_full"] += 1
+            # Not acknowledged (it did not fit), but answered: a window update
+            # showing the shut window keeps the sender's liveness clock fresh,
+            # or a slow reader would look like a dead link.
+            self._queue_ack(self._receiver.last_in_order())
         self._receiver.take_fields(arrival, self._encoding)
         if arrival.ack is not None:
             self._queue_ack(arrival.ack)
