@@ -510,6 +510,18 @@ def _close_timeout(config: EndpointConfig) -> float:
     return config.derived_dead_after()
 
 
+async def _start_driver(
+    port: trio.abc.Stream, cfg: EndpointConfig, nursery: trio.Nursery | None
+) -> _Driver:
+    """A driver that owns ``port``, running in ``nursery`` or as a system task."""
+    driver = _Driver(port, Endpoint(cfg), owns_port=True)
+    if nursery is not None:
+        await nursery.start(driver.run)
+    else:
+        trio.lowlevel.spawn_system_task(driver.run)
+    return driver
+
+
 async def connect(
     port: trio.abc.Stream,
     config: EndpointConfig | None = None,
@@ -527,11 +539,7 @@ async def connect(
         trio.BrokenResourceError: the port failed while connecting.
     """
     cfg = config or EndpointConfig()
-    driver = _Driver(port, Endpoint(cfg), owns_port=True)
-    if nursery is not None:
-        await nursery.start(driver.run)
-    else:
-        trio.lowlevel.spawn_system_task(driver.run)
+    driver = await _start_driver(port, cfg, nursery)
     driver.ep.connect(driver.now())
     driver.notify()
     try:
@@ -565,11 +573,7 @@ async def accept(
         trio.BrokenResourceError: the port failed while listening.
     """
     cfg = config or EndpointConfig()
-    driver = _Driver(port, Endpoint(cfg), owns_port=True)
-    if nursery is not None:
-        await nursery.start(driver.run)
-    else:
-        trio.lowlevel.spawn_system_task(driver.run)
+    driver = await _start_driver(port, cfg, nursery)
     driver.ep.listen()
     try:
         while driver.ep.state is not State.ESTABLISHED:
