@@ -13,7 +13,7 @@ PKGS   := serialsocket tcpstream linksim
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,dev]'
+	$(PY) -m pip install --quiet -e '.[test,dev,plot]'
 	touch $(STAMP)
 
 demo: $(STAMP)
