@@ -29,6 +29,17 @@ from ._events import ConnectionRequested as ConnectionRequested
 from ._events import EndOfStream as EndOfStream
 from ._events import Event as Event
 from ._events import LinkDead as LinkDead
+from ._hayes import DialError as DialError
+from ._hayes import LineBusy as LineBusy
+from ._hayes import ModemConnection as ModemConnection
+from ._hayes import ModemError as ModemError
+from ._hayes import ModemTimeout as ModemTimeout
+from ._hayes import NoAnswer as NoAnswer
+from ._hayes import NoCarrier as NoCarrier
+from ._hayes import NoDialtone as NoDialtone
+from ._hayes import answer as answer
+from ._hayes import dial as dial
+from ._hayes import hangup as hangup
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity
@@ -42,6 +53,10 @@ from ._parser import PacketRejected as PacketRejected
 from ._parser import ParserEvent as ParserEvent
 from ._parser import ParserStatistics as ParserStatistics
 from ._parser import RejectReason as RejectReason
+from ._port import PortStatistics as PortStatistics
+from ._port import SerialPort as SerialPort
+from ._port import open_port as open_port
+from ._port import open_pty_pair as open_pty_pair
 from ._socket import LineFailed as LineFailed
 from ._socket import LinkBroken as LinkBroken
 from ._socket import LinkDeadError as LinkDeadError
@@ -73,6 +88,7 @@ __all__ = [
     "ConnectionAborted",
     "ConnectionClosed",
     "ConnectionRequested",
+    "DialError",
     "Encoding",
     "EndOfStream",
     "Endpoint",
@@ -80,13 +96,20 @@ __all__ = [
     "EndpointStatistics",
     "Event",
     "InitParameters",
+    "LineBusy",
     "LineFailed",
     "LinkBroken",
     "LinkDead",
     "LinkDeadError",
     "LocalProtocolError",
     "MalformedDataError",
+    "ModemConnection",
+    "ModemError",
+    "ModemTimeout",
     "Negotiated",
+    "NoAnswer",
+    "NoCarrier",
+    "NoDialtone",
     "Packet",
     "PacketParser",
     "PacketReceived",
@@ -95,20 +118,27 @@ __all__ = [
     "ParserEvent",
     "ParserStatistics",
     "PeerAborted",
+    "PortStatistics",
     "ProtocolError",
     "RejectReason",
     "RemoteProtocolError",
     "SerialListener",
+    "SerialPort",
     "SerialSocket",
     "SocketStatistics",
     "State",
     "accept",
+    "answer",
     "build_packet",
     "check_chars",
     "connect",
     "crc16_kermit",
     "data_capacity",
+    "dial",
+    "hangup",
     "listen",
+    "open_port",
+    "open_pty_pair",
     "open_serial_socket",
     "packet_length",
     "serve",

@@ -41,6 +41,7 @@ from ._config import EndpointConfig
 from ._endpoint import Endpoint, EndpointStatistics
 from ._errors import LocalProtocolError
 from ._events import ConnectionAborted, LinkDead
+from ._port import PortStatistics, SerialPort
 from ._state import TERMINAL, State
 
 __all__ = [
@@ -116,6 +117,8 @@ class SocketStatistics:
         port_writes: write calls.
         port_bytes_in: bytes read from the port.
         port_bytes_out: bytes written to the port.
+        port: the port's own record (its name and OS errors) when the port
+            is a :class:`~serialsocket.SerialPort`, else None.
     """
 
     link: EndpointStatistics
@@ -123,6 +126,7 @@ class SocketStatistics:
     port_writes: int
     port_bytes_in: int
     port_bytes_out: int
+    port: PortStatistics | None = None
 
 
 class _Driver:
@@ -297,6 +301,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             port_writes=d.writes,
             port_bytes_in=d.bytes_in,
             port_bytes_out=d.bytes_out,
+            port=d.port.statistics() if isinstance(d.port, SerialPort) else None,
         )
 
     # -- checks -----------------------------------------------------------------

@@ -122,6 +122,22 @@ def test_public_names_are_pinned() -> None:
             "listen",
             "open_serial_socket",
             "serve",
+            # layer 1: ports and modems
+            "PortStatistics",
+            "SerialPort",
+            "open_port",
+            "open_pty_pair",
+            "DialError",
+            "LineBusy",
+            "ModemConnection",
+            "ModemError",
+            "ModemTimeout",
+            "NoAnswer",
+            "NoCarrier",
+            "NoDialtone",
+            "answer",
+            "dial",
+            "hangup",
         ]
     )
     for name in serialsocket.__all__:

@@ -1,0 +1,177 @@
+"""Port I/O: pty pairs, device paths through pyserial, pyserial URLs (real I/O, hang-guarded)."""
+
+from __future__ import annotations
+
+import errno
+import pathlib
+import termios
+from collections.abc import Awaitable, Callable
+
+import pytest
+import trio
+
+from serialsocket import PortStatistics, SerialPort, open_port, open_pty_pair
+
+LIMIT = 20.0  # hang guard only: these tests move a few KB
+
+
+def run(fn: Callable[[], Awaitable[None]]) -> None:
+    async def guarded() -> None:
+        with trio.fail_after(LIMIT):
+            await fn()
+
+    trio.run(guarded)
+
+
+async def read_exactly(port: trio.abc.ReceiveStream, n: int) -> bytes:
+    got = bytearray()
+    while len(got) < n:
+        chunk = await port.receive_some(n - len(got))
+        assert chunk, "unexpected EOF"
+        got += chunk
+    return bytes(got)
+
+
+def test_pty_pair_is_raw_and_counts() -> None:
+    data = bytes(range(256)) * 16  # every byte value, incl. ^C, ^D, ^S, CR: raw mode
+
+    async def main() -> None:
+        a, b = open_pty_pair()
+        async with a, b:
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(a.send_all, data)
+                assert await read_exactly(b, len(data)) == data
+            await b.send_all(b"\r\n")
+            assert await read_exactly(a, 2) == b"\r\n"  # no CR/LF translation
+            sa, sb = a.statistics(), b.statistics()
+            assert (sa.bytes_out, sa.bytes_in, sa.writes, sa.errors) == (len(data), 2, 1, 0)
+            assert (sb.bytes_in, sb.bytes_out, sb.writes) == (len(data), 2, 1)
+            assert sb.name.startswith("/dev/")
+            assert isinstance(sa, PortStatistics)
+
+    run(main)
+
+
+def test_other_side_closing_is_broken_with_the_os_error() -> None:
+    async def main() -> None:
+        a, b = open_pty_pair()
+        await b.aclose()
+        with pytest.raises(trio.BrokenResourceError, match="the other end of the pty") as info:
+            await a.receive_some()
+        cause = info.value.__cause__
+        assert isinstance(cause, OSError)
+        assert cause.errno == errno.EIO
+        assert a.statistics().errors == 1
+        await a.aclose()
+
+    run(main)
+
+
+def test_close_wakes_a_blocked_reader_and_later_use_is_closed() -> None:
+    async def main() -> None:
+        a, b = open_pty_pair()
+        async with b:
+            async with trio.open_nursery() as nursery:
+
+                async def blocked() -> None:
+                    with pytest.raises(trio.ClosedResourceError):
+                        await a.receive_some()
+
+                nursery.start_soon(blocked)
+                await trio.sleep(0.05)
+                await a.aclose()
+            with pytest.raises(trio.ClosedResourceError, match="was closed"):
+                await a.send_all(b"x")
+            with pytest.raises(trio.ClosedResourceError):
+                await a.receive_some()
+            await a.aclose()  # idempotent
+
+    run(main)
+
+
+def test_device_path_through_pyserial_sets_8n1_raw_and_baud() -> None:
+    async def main() -> None:
+        master, slave = open_pty_pair()
+        async with master, slave:
+            # A pty slave has no modem lines: the DTR/RTS ioctls fail and are ignored.
+            port = await open_port(slave.name, 19200)
+            async with port:
+                assert port.serial is not None
+                assert port.serial.baudrate == 19200
+                fd = port.serial.fd
+                iflag, _oflag, cflag, _lflag, ispeed, _ospeed, _cc = termios.tcgetattr(fd)
+                assert ispeed == termios.B19200
+                assert cflag & termios.CSIZE == termios.CS8
+                assert not cflag & (termios.PARENB | termios.CSTOPB | termios.CRTSCTS)
+                assert not iflag & (termios.IXON | termios.IXOFF | termios.ICRNL)
+                await port.send_all(b"\x00\x11\x13\r\xff")  # XON/XOFF pass: no flow control
+                assert await read_exactly(master, 5) == b"\x00\x11\x13\r\xff"
+                await master.send_all(b"reply")
+                assert await read_exactly(port, 5) == b"reply"
+
+    run(main)
+
+
+def test_open_errors_say_what_to_check() -> None:
+    async def main() -> None:
+        with pytest.raises(OSError, match="check the path and its permissions") as info:
+            await open_port("/dev/does-not-exist-telelink")
+        assert info.value.errno == errno.ENOENT
+        with pytest.raises(ValueError, match="invalid URL"):
+            await open_port("nosuchscheme://x")
+
+    run(main)
+
+
+def test_loop_url_thread_adapter_loses_nothing_on_cancel() -> None:
+    async def main() -> None:
+        port = await open_port("loop://", 9600)
+        assert isinstance(port, SerialPort)
+        async with port:
+            with trio.move_on_after(0.1) as scope:
+                await port.receive_some()  # nothing there: cancelled while waiting
+            assert scope.cancelled_caught
+            payload = bytes(range(256)) * 40
+            await port.send_all(payload)
+            assert await read_exactly(port, len(payload)) == payload
+            assert port.statistics().bytes_in == len(payload)
+        with pytest.raises(trio.ClosedResourceError):
+            await port.receive_some()
+
+    run(main)
+
+
+def test_socket_url_and_peer_disconnect() -> None:
+    async def main() -> None:
+        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+        addr = listeners[0].socket.getsockname()
+        async with listeners[0] as listener:
+            port = await open_port(f"socket://{addr[0]}:{addr[1]}")
+            async with port:
+                peer = await listener.accept()
+                await port.send_all(b"over tcp")
+                assert await read_exactly(peer, 8) == b"over tcp"
+                await peer.send_all(b"and back")
+                assert await read_exactly(port, 8) == b"and back"
+                await peer.aclose()
+                with pytest.raises(trio.BrokenResourceError) as info:
+                    await port.receive_some()
+                assert isinstance(info.value.__cause__, OSError)
+
+    run(main)
+
+
+def test_spy_url_logs_the_traffic(tmp_path: pathlib.Path) -> None:
+    log = tmp_path / "spy.txt"
+
+    async def main() -> None:
+        master, slave = open_pty_pair()
+        async with master, slave:
+            port = await open_port(f"spy://{slave.name}?file={log}", 9600)
+            async with port:
+                await port.send_all(b"spy me")
+                assert await read_exactly(master, 6) == b"spy me"
+
+    run(main)
+    assert "TX" in log.read_text()
+    assert "spy me" in log.read_text()
