@@ -8,6 +8,7 @@ sized for slow, long-delay lines.  Both are sans-I/O: bytes and ``now`` in,
 bytes, events and timer deadlines out; no clocks or sockets inside.
 """
 
+from ._blocking import BlockingSerialSocket as BlockingSerialSocket
 from ._checks import BlockCheck as BlockCheck
 from ._checks import check_chars as check_chars
 from ._checks import crc16_kermit as crc16_kermit
@@ -84,6 +85,7 @@ __all__ = [
     "PRINTABLE",
     "PROTOCOL_VERSION",
     "BlockCheck",
+    "BlockingSerialSocket",
     "Connected",
     "ConnectionAborted",
     "ConnectionClosed",

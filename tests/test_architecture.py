@@ -138,6 +138,7 @@ def test_public_names_are_pinned() -> None:
             "answer",
             "dial",
             "hangup",
+            "BlockingSerialSocket",
         ]
     )
     for name in serialsocket.__all__:
