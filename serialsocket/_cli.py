@@ -1,8 +1,10 @@
-"""Command line: ``python -m serialsocket encode|decode`` (the packet inspector).
+"""Command line: ``serialsocket encode|decode|listen|connect`` (also ``python -m serialsocket``).
 
 ``encode`` reads payload bytes on stdin and writes wire packets on stdout;
 ``decode`` reads wire bytes on stdin and prints one JSON object per packet or
 per rejected chunk.  ``encode | decode --raw`` reproduces the input exactly.
+``listen PORT`` and ``connect PORT`` are a netcat over the serial socket
+(see :mod:`serialsocket._netcat`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from collections.abc import Sequence
 from ._checks import BlockCheck
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError, MalformedDataError
+from ._netcat import add_arguments as add_netcat_arguments
+from ._netcat import netcat_main
 from ._packet import Packet, build_packet, data_capacity
 from ._parser import PacketParser, PacketReceived
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, SEQ_MODULUS
@@ -36,7 +40,8 @@ def _check(value: str) -> BlockCheck:
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m serialsocket",
-        description="Kermit packet inspector for the serialsocket wire format.",
+        description="Serial sockets: a netcat over a serial line (listen, connect) and the "
+        "Kermit packet inspector (encode, decode).",
     )
     sub = ap.add_subparsers(dest="command", required=True)
 
@@ -67,6 +72,13 @@ def _parser() -> argparse.ArgumentParser:
     dec.add_argument(
         "--raw", action="store_true", help="write the decoded payloads to stdout instead of JSON"
     )
+
+    lis = sub.add_parser(
+        "listen", help="wait for one connection on PORT; stdin to the link, the link to stdout"
+    )
+    add_netcat_arguments(lis, listening=True)
+    con = sub.add_parser("connect", help="connect over PORT; stdin to the link, the link to stdout")
+    add_netcat_arguments(con, listening=False)
     return ap
 
 
@@ -150,6 +162,8 @@ def _decode(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the inspector; returns the process exit status."""
     args = _parser().parse_args(argv)
+    if args.command in ("listen", "connect"):
+        return netcat_main(args, listening=args.command == "listen")
     try:
         if args.command == "encode":
             return _encode(args)

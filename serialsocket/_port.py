@@ -31,14 +31,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import termios
 import threading
+import tty
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import serial
 import trio
 
-__all__ = ["PortStatistics", "SerialPort", "open_port", "open_pty_pair"]
+__all__ = ["PortStatistics", "SerialPort", "open_port", "open_pty_pair", "port_statistics"]
 
 _READ_SIZE = 65536
 """Bytes asked of the device per read; a pty hands out at most ~4 KB anyway."""
@@ -198,6 +200,16 @@ class SerialPort(trio.abc.Stream):
         await self._t.aclose()
 
 
+def port_statistics(port: object) -> PortStatistics | None:
+    """``port.statistics()`` when it is a :class:`PortStatistics` record (else None).
+
+    Duck-typed so that wrappers (the packet trace) pass their port's record on.
+    """
+    fn = getattr(port, "statistics", None)
+    stats = fn() if callable(fn) else None
+    return stats if isinstance(stats, PortStatistics) else None
+
+
 def _cause_of(exc: BaseException) -> BaseException | None:
     """The OSError behind ``exc`` (itself, or trio's chained cause), for chaining."""
     if isinstance(exc, OSError):
@@ -353,6 +365,23 @@ def _open_serial(
     return ser
 
 
+def _read_blocks_for_one_byte(fd: int) -> None:
+    """VMIN = 1, VTIME = 0: a read waits for at least one byte.
+
+    pyserial leaves VMIN = VTIME = 0 (it times reads with select), and in
+    that mode a tty read with no data returns 0 bytes -- even on a
+    non-blocking fd, where EAGAIN is expected -- which FdStream would report
+    as end of file.  With VMIN = 1 a non-blocking read says EAGAIN and trio
+    waits for the fd to become readable.
+    """
+    attrs = termios.tcgetattr(fd)
+    cc = attrs[6]
+    if cc[termios.VMIN] != 1 or cc[termios.VTIME] != 0:
+        cc[termios.VMIN] = 1
+        cc[termios.VTIME] = 0
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+
+
 async def open_port(
     path_or_url: str,
     baud: int = 9600,
@@ -401,6 +430,7 @@ async def open_port(
     if thread_io:
         return SerialPort(_ThreadTransport(ser), path_or_url, ser)
     try:
+        _read_blocks_for_one_byte(ser.fd)
         transport = _FdTransport(ser.fd, ser)
     except BaseException:
         ser.close()
@@ -417,8 +447,6 @@ def open_pty_pair() -> tuple[SerialPort, SerialPort]:
     ``name`` is its path (``/dev/pts/N``): another program may open it too,
     but then both readers compete for the bytes.
     """
-    import tty  # POSIX only; imported here so the module imports everywhere
-
     master, slave = os.openpty()
     try:
         tty.setraw(slave)

@@ -41,7 +41,7 @@ from ._config import EndpointConfig
 from ._endpoint import Endpoint, EndpointStatistics
 from ._errors import LocalProtocolError
 from ._events import ConnectionAborted, LinkDead
-from ._port import PortStatistics, SerialPort
+from ._port import PortStatistics, port_statistics
 from ._state import TERMINAL, State
 
 __all__ = [
@@ -118,7 +118,7 @@ class SocketStatistics:
         port_bytes_in: bytes read from the port.
         port_bytes_out: bytes written to the port.
         port: the port's own record (its name and OS errors) when the port
-            is a :class:`~serialsocket.SerialPort`, else None.
+            keeps one (a :class:`~serialsocket.SerialPort`), else None.
     """
 
     link: EndpointStatistics
@@ -301,7 +301,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             port_writes=d.writes,
             port_bytes_in=d.bytes_in,
             port_bytes_out=d.bytes_out,
-            port=d.port.statistics() if isinstance(d.port, SerialPort) else None,
+            port=port_statistics(d.port),
         )
 
     # -- checks -----------------------------------------------------------------

@@ -175,3 +175,22 @@ def test_spy_url_logs_the_traffic(tmp_path: pathlib.Path) -> None:
     run(main)
     assert "TX" in log.read_text()
     assert "spy me" in log.read_text()
+
+
+def test_device_port_waits_for_data_instead_of_reading_eof() -> None:
+    # pyserial leaves VMIN = 0, where a tty read with no data returns b""
+    # (it would look like EOF); the port must wait for the next byte instead.
+    async def main() -> None:
+        master, slave = open_pty_pair()
+        async with master, slave:
+            port = await open_port(slave.name, 9600)
+            async with port, trio.open_nursery() as nursery:
+
+                async def late() -> None:
+                    await trio.sleep(0.1)
+                    await master.send_all(b"late")
+
+                nursery.start_soon(late)
+                assert await read_exactly(port, 4) == b"late"
+
+    run(main)

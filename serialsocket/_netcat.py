@@ -1,0 +1,181 @@
+"""``python -m serialsocket listen|connect PORT``: a netcat over the serial socket.
+
+stdin goes to the link and the link to stdout, byte for byte.  At EOF on
+stdin the socket half-closes (the peer reads EOF once every byte arrived);
+the program exits when both directions are done, after a graceful close.
+``listen`` waits for one connection (after answering a modem call with
+``--answer``); ``connect`` dials first with ``--dial NUMBER``.
+
+stdin and stdout are read and written in worker threads, not through
+``FdStream``: that would put the caller's terminal or shared pipe into
+non-blocking mode (see trio's FdStream warning), and a slow stdout must not
+stall the event loop that answers the peer's packets.
+
+Exit status: 0 when both directions finished cleanly; 1 when the link or the
+modem failed (the message on stderr says why); 2 for bad options.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+
+import trio
+
+from ._config import MAX_WINDOW, EndpointConfig
+from ._errors import LocalProtocolError
+from ._hayes import DialError, ModemConnection, answer, dial
+from ._port import open_port
+from ._socket import LinkBroken, SerialSocket, accept, connect
+from ._trace import TracingStream
+from ._wire import DEFAULT_MAX_PACKET_LENGTH
+
+__all__ = ["add_arguments", "netcat_main"]
+
+_CHUNK = 65536
+"""Bytes per stdin read: one read can fill many packets."""
+
+_DEFAULT_BAUD = 9600
+
+
+def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
+    """Options of ``listen`` and ``connect``."""
+    ap.add_argument("port", metavar="PORT", help="device path, pty or pyserial URL (loop://...)")
+    ap.add_argument(
+        "--baud",
+        type=int,
+        help=f"line rate in bit/s (default {_DEFAULT_BAUD}); also tells the protocol the rate",
+    )
+    if listening:
+        ap.add_argument(
+            "--answer", action="store_true", help="wait for a modem call (RING) and answer it"
+        )
+    else:
+        ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
+    ap.add_argument("--window", type=int, default=16, help=f"window, 1..{MAX_WINDOW} (default 16)")
+    ap.add_argument(
+        "--max-len",
+        type=int,
+        default=DEFAULT_MAX_PACKET_LENGTH,
+        help=f"largest packet to receive, MARK..CHECK (default {DEFAULT_MAX_PACKET_LENGTH})",
+    )
+    ap.add_argument(
+        "--delay",
+        type=float,
+        default=0.0,
+        help="one-way delay of the line in seconds (a hint for the timers; 1.3 for the Moon)",
+    )
+    ap.add_argument("--dead-after", type=float, help="declare the link dead after this silence")
+    ap.add_argument("--trace", action="store_true", help="log every packet, decoded, to stderr")
+
+
+async def _read_stdin() -> bytes:
+    # abandon_on_cancel: a read blocked on an idle terminal must not hold up
+    # exit; whatever it returns afterwards is not wanted any more.
+    return await trio.to_thread.run_sync(os.read, 0, _CHUNK, abandon_on_cancel=True)
+
+
+def _write_all(data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(1, view) :]
+
+
+async def _pump(sock: SerialSocket) -> None:
+    async def upstream() -> None:
+        while data := await _read_stdin():
+            await sock.send_all(data)
+        await sock.send_eof()
+
+    async def downstream() -> None:
+        while data := await sock.receive_some(_CHUNK):
+            await trio.to_thread.run_sync(_write_all, data)
+
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(upstream)
+        nursery.start_soon(downstream)
+
+
+def _config(args: argparse.Namespace, modem: ModemConnection | None) -> EndpointConfig:
+    rate: float | None = None
+    if modem is not None and modem.rate is not None:
+        rate = modem.rate  # the modems' rate on the phone line, not the DTE's
+    elif args.baud is not None:
+        rate = args.baud
+    return EndpointConfig(
+        window=args.window,
+        max_packet_length=args.max_len,
+        one_way_delay=args.delay,
+        line_rate=rate,
+        dead_after=args.dead_after,
+    )
+
+
+async def _run(args: argparse.Namespace, listening: bool) -> None:
+    _config(args, None)  # validate the options before touching the port
+    port = await open_port(args.port, args.baud or _DEFAULT_BAUD)
+    stream: trio.abc.Stream = port
+    try:
+        modem: ModemConnection | None = None
+        if listening and args.answer:
+            modem = await answer(port)
+        elif not listening and args.dial:
+            modem = await dial(port, args.dial)
+        if modem is not None:
+            print(f"serialsocket: {modem.result}", file=sys.stderr)
+        cfg = _config(args, modem)
+        if args.trace:
+            stream = TracingStream(port, cfg.encoding)
+    except BaseException:
+        await trio.aclose_forcefully(port)
+        raise
+    async with trio.open_nursery() as nursery:
+        if listening:
+            sock = await accept(stream, cfg, nursery=nursery)
+        else:
+            sock = await connect(stream, cfg, nursery=nursery)
+        try:
+            await _pump(sock)
+        finally:
+            await sock.aclose()
+
+
+def _first_leaf(group: BaseExceptionGroup[BaseException]) -> BaseException:
+    """The first real exception in a (nested) nursery exception group."""
+    exc: BaseException = group
+    while isinstance(exc, BaseExceptionGroup):
+        exc = exc.exceptions[0]
+    return exc
+
+
+def netcat_main(args: argparse.Namespace, *, listening: bool) -> int:
+    """Run ``listen`` or ``connect``; returns the exit status."""
+    if args.trace:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(relativeCreated)9.1f ms %(message)s"))
+        trace = logging.getLogger("serialsocket.trace")
+        trace.addHandler(handler)
+        trace.setLevel(logging.DEBUG)
+        trace.propagate = False
+    name = "listen" if listening else "connect"
+    try:
+        try:
+            trio.run(_run, args, listening)
+        except BaseExceptionGroup as group:
+            raise _first_leaf(group) from None
+    except LocalProtocolError as exc:
+        print(f"serialsocket {name}: {exc}", file=sys.stderr)
+        return 2
+    except (DialError, OSError, ConnectionRefusedError) as exc:
+        print(f"serialsocket {name}: {exc}", file=sys.stderr)
+        return 1
+    except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+        cause = exc.__cause__
+        reason = cause if isinstance(cause, LinkBroken) else exc
+        print(f"serialsocket {name}: the link failed: {reason}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    return 0

@@ -1,0 +1,88 @@
+"""``serialsocket listen|connect``: a netcat over real ptys through ``linksim relay``.
+
+Everything runs as subprocesses, as a user runs it; each wait has a generous
+timeout that only stops a hang.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import random
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+GUARD = 60.0
+
+
+@pytest.fixture
+def relay() -> Iterator[tuple[str, str]]:
+    """A clean ``linksim relay`` (2 ms each way); yields the two tty paths."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "linksim", "relay", "--json", "--delay", "0.002"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        paths = json.loads(proc.stdout.readline())
+        yield paths["a"], paths["b"]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=GUARD) == 0
+
+
+def cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "serialsocket", *args]
+
+
+def test_files_both_ways_byte_exact_and_clean_exit(
+    relay: tuple[str, str], tmp_path: pathlib.Path
+) -> None:
+    a, b = relay
+    upload = random.Random(5).randbytes(60_000) + bytes(range(256)) * 20
+    download = b"arm telemetry\r\n\x00\x01\x03\x11\x13\xff" * 2000
+    (tmp_path / "up").write_bytes(upload)
+    (tmp_path / "down").write_bytes(download)
+    with (tmp_path / "down").open("rb") as down_in:
+        server = subprocess.Popen(
+            cli("listen", b, "--delay", "0.002"),
+            stdin=down_in,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+    time.sleep(0.3)  # let the listener open its port (a connect retries anyway)
+    with (tmp_path / "up").open("rb") as up_in:
+        client = subprocess.run(
+            cli("connect", a, "--delay", "0.002", "--window", "8", "--trace"),
+            stdin=up_in,
+            capture_output=True,
+            timeout=GUARD,
+        )
+    got_up, server_err = server.communicate(timeout=GUARD)
+    assert client.returncode == 0, client.stderr[-2000:]
+    assert server.returncode == 0, server_err
+    assert got_up == upload
+    assert client.stdout == download
+    trace = client.stderr.decode()
+    assert "tx I seq=0 len=33" in trace  # the connect request
+    assert "rx Y seq=0" in trace  # its answer
+    assert "tx D seq=1 len=128" in trace
+
+
+def test_errors_are_reported_with_exit_status() -> None:
+    missing = subprocess.run(
+        cli("connect", "/dev/no-such-tty-telelink"), capture_output=True, timeout=GUARD
+    )
+    assert missing.returncode == 1
+    assert b"check the path and its permissions" in missing.stderr
+    bad = subprocess.run(
+        cli("connect", "loop://", "--window", "40"), capture_output=True, timeout=GUARD
+    )
+    assert bad.returncode == 2
+    assert b"window=40: must be 1..31" in bad.stderr
