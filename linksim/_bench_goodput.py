@@ -1,60 +1,69 @@
-"""``linksim bench goodput``: ARQ goodput against the theoretical limit, on virtual time.
+"""``linksim bench goodput``: ARQ goodput against the line's theoretical limit, on virtual time.
 
-Two sans-I/O endpoints talk through two :class:`~linksim._impair.LinkDirection`
-engines in a discrete-event loop: time jumps from one event (a byte arrival or
-a timer) to the next, so an hour of a 2400 bit/s link costs a fraction of a
-second and the result is exact and machine-independent.
+Every figure this command prints is *virtual-time*: two sans-I/O endpoints
+exchange bytes through the seeded impairment engine on an explicit clock
+(:mod:`linksim._bench_transfer`), so the same arguments give the same rows on
+any machine, loaded or idle.  Only the run time of the command itself depends
+on the machine.
 
-Theoretical goodput (issue 3): line rate in bytes/s x (payload bytes carried
-by a full data packet / wire bytes of that packet, MARK through EOL, for the
-benchmark's data) x (1 - probability that a packet of that size is hit).
-ACKs travel the other way and do not count against it.
+Modes:
+
+* default / ``--full``: the designed grid, every sweep in
+  :data:`~linksim._bench_grid.SWEEPS` (a few minutes on two cores);
+* ``--quick``: the base row and a few neighbours (well under a minute);
+* ``--sweep NAME``: chosen sweeps;
+* any of ``--rate --delay --ber --burst --window --max-len --payload
+  --profile --eight-bit``: the cross product of the values given, the base
+  point supplying the rest (``--window`` and the others may repeat).
+
+Output: a text table, or ``--json`` (the rows as one JSON array on stdout),
+and/or ``--output FILE.json``; ``--plot FILE.png`` draws efficiency against
+delay and against error rate, one line per window (needs the ``plot`` extra).
+The exit status is 1 if any row's delivered data was not exact.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
-import math
 import sys
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
 
-from serialsocket import (
-    EIGHT_BIT_CLEAN,
-    PRINTABLE,
-    BlockCheck,
-    ConnectionAborted,
-    Endpoint,
-    EndpointConfig,
-    LinkDead,
-    State,
-    data_capacity,
+from ._bench_grid import (
+    BASE,
+    QUICK,
+    ROW_KEYS,
+    SWEEPS,
+    Point,
+    auto_packet_length,
+    build_grid,
+    cpu_count,
+    make_payload,
+    run_grid,
 )
+from ._bench_transfer import BENCH_BURST, PROFILES, limit_goodput, simulate
 
-from ._bench_codec import sample_payload
-from ._config import DirectionConfig, GilbertElliott, LinkConfig
-from ._impair import LinkDirection
+__all__ = ["GoodputResult", "add_arguments", "main", "run_transfer", "theoretical_goodput"]
 
-__all__ = ["GoodputResult", "add_arguments", "run_transfer", "theoretical_goodput"]
+
+# -- the single-transfer API (kept for callers of the first version) ------------------
 
 
 @dataclass(frozen=True, slots=True)
 class GoodputResult:
-    """One measured point.
+    """One measured transfer (the regression tests' view of a point).
 
     Attributes:
-        window: configured window.
-        max_len: maximum packet length (MARK through CHECK).
-        rate: line rate, bit/s.
-        delay: one-way delay, s.
-        byte_error_rate: independent byte error probability per direction.
-        payload: kind of data (binary/text).
+        window, max_len, rate, delay, byte_error_rate, payload, profile: the point.
         bytes: payload size.
-        seconds: simulated time from connection to the last byte delivered.
-        goodput: payload bytes per simulated second.
-        theoretical: the limit for this line, packet size and data.
-        efficiency: goodput / theoretical.
+        seconds: virtual time from connection to the last byte delivered.
+        goodput: payload bytes per virtual second.
+        theoretical: the limit for this line, packet size and data, bytes/s.
+        efficiency: goodput / theoretical (the rows' ``ratio_to_limit``).
         retransmissions, timeouts, naks: sender-side counters.
         ok: every byte arrived exactly once, in order.
     """
@@ -81,22 +90,22 @@ def theoretical_goodput(
     payload: bytes,
     *,
     rate: float,
-    bits_per_char: int,
+    bits_per_char: int = 10,
     max_len: int,
     byte_error_rate: float,
     eight_bit: bool = False,
+    burst: bool = False,
 ) -> float:
-    """The issue's formula, with the packet efficiency measured on this very data."""
-    encoding = EIGHT_BIT_CLEAN if eight_bit else PRINTABLE
-    cap = data_capacity(max_len, BlockCheck.CRC16)
-    fields = encoding.encode_fields(payload, cap, 1 << 30)
-    full = fields[:-1] or fields
-    carried = sum(used for _, used in full)
-    wire = sum(len(f) + 7 + 3 + 1 for f, _ in full)  # extended header, CRC, EOL
-    if max_len <= 96:
-        wire -= 3 * len(full)  # normal header is 3 shorter
-    per_packet_error = 1.0 - float((1.0 - byte_error_rate) ** (wire / len(full)))
-    return rate / bits_per_char * carried / wire * (1 - per_packet_error)
+    """The theoretical limit in payload bytes/s (see :mod:`linksim._bench_transfer`)."""
+    limit, _ = limit_goodput(
+        payload,
+        rate=rate * 10 / bits_per_char,
+        max_len=max_len,
+        encoding=PROFILES["8bit" if eight_bit else "printable"],
+        byte_error_rate=byte_error_rate,
+        burst=BENCH_BURST if burst else None,
+    )
+    return limit
 
 
 def run_transfer(
@@ -112,76 +121,36 @@ def run_transfer(
     seed: int = 1,
     burst: bool = False,
 ) -> GoodputResult:
-    """Send ``size`` bytes one way over an impaired line and measure the goodput."""
-    direction = DirectionConfig(
+    """Send ``size`` bytes one way over an impaired line and measure the goodput.
+
+    ``burst`` adds the grid's Gilbert-Elliott case on top of ``byte_error_rate``.
+    The transfer runs to completion (no time cap short of a protocol failure).
+    """
+    profile = "8bit" if eight_bit else "printable"
+    payload = make_payload(payload_kind, size, seed)
+    ge = BENCH_BURST if burst else None
+    m = simulate(
+        payload,
         rate=rate,
         delay=delay,
         byte_error_rate=byte_error_rate,
-        burst=GilbertElliott(p_good_to_bad=5e-5, p_bad_to_good=0.05, error_bad=0.3)
-        if burst
-        else None,
-    )
-    link = LinkConfig.symmetric(direction, seed=seed)
-    cfg = EndpointConfig(
-        one_way_delay=delay,
-        line_rate=rate,
+        burst=ge,
         window=window,
-        max_packet_length=max_len,
-        encoding=EIGHT_BIT_CLEAN if eight_bit else PRINTABLE,
-        dead_after=1e9,
+        max_len=max_len,
+        encoding=PROFILES[profile],
+        seed=seed,
+        # A generous bound so that a protocol bug cannot spin forever.
+        time_cap=50 * size / (rate / 10) + 1000 * (2 * delay + 1),
     )
-    payload = sample_payload(payload_kind, size, seed)
-    a, b = Endpoint(cfg), Endpoint(cfg)
-    ab = LinkDirection(link.a_to_b, seed=link.seed, direction=0)
-    ba = LinkDirection(link.b_to_a, seed=link.seed, direction=1)
-    now = 0.0
-    b.listen()
-    a.connect(now)
-    got = bytearray()
-    pos = 0
-    start: float | None = None
-    # A generous bound on simulated time so a protocol bug cannot spin forever.
-    quantum = 16 * 10 / rate
-    limit = 50 * size / (rate / 10) + 1000 * (2 * delay + 1)
-    while len(got) < size:
-        if start is None and a.state is State.ESTABLISHED:
-            start = now
-        if a.state is State.ESTABLISHED and pos < size:
-            pos += a.send(memoryview(payload)[pos:], now)
-        ab.send(a.data_to_send(now), now)
-        ba.send(b.data_to_send(now), now)
-        timers = [
-            t for ep in (a, b) for t in (ep.get_timer(), ep.get_send_timer()) if t is not None
-        ]
-        arrivals = [t for t in (ab.next_delivery(), ba.next_delivery()) if t is not None]
-        if not (timers or arrivals) or now > limit:
-            break
-        # Read the line like a serial reader does, in small batches (16
-        # character times), but never past a timer that is due first.
-        wake = min(timers, default=math.inf)
-        if arrivals:
-            wake = min(wake, min(arrivals) + quantum)
-        now = max(now, wake)
-        b.receive_data(ab.receive(now), now)
-        a.receive_data(ba.receive(now), now)
-        for ep in (a, b):
-            t = ep.get_timer()
-            if t is not None and t <= now:
-                ep.handle_timer(now)
-        got += b.read(None, now)
-        if any(isinstance(e, ConnectionAborted | LinkDead) for ep in (a, b) for e in ep.events()):
-            break
-    seconds = now - (start or 0.0)
-    goodput = len(got) / seconds if seconds > 0 else 0.0
-    theory = theoretical_goodput(
+    theory, _ = limit_goodput(
         payload,
         rate=rate,
-        bits_per_char=10,
         max_len=max_len,
+        encoding=PROFILES[profile],
         byte_error_rate=byte_error_rate,
-        eight_bit=eight_bit,
+        burst=ge,
     )
-    s = a.statistics()
+    goodput = m.delivered / m.seconds if m.seconds > 0 else 0.0
     return GoodputResult(
         window=window,
         max_len=max_len,
@@ -189,67 +158,171 @@ def run_transfer(
         delay=delay,
         byte_error_rate=byte_error_rate,
         payload=payload_kind,
-        profile="8bit" if eight_bit else "printable",
+        profile=profile,
         bytes=size,
-        seconds=round(seconds, 3),
+        seconds=round(m.seconds, 3),
         goodput=round(goodput, 3),
         theoretical=round(theory, 3),
         efficiency=round(goodput / theory, 4) if theory else 0.0,
-        retransmissions=s.retransmissions,
-        timeouts=s.timeouts,
-        naks=s.naks_received,
-        ok=bytes(got) == payload,
+        retransmissions=m.retransmissions,
+        timeouts=m.timeouts,
+        naks=m.naks,
+        ok=m.ok and m.complete,
     )
+
+
+# -- the CLI ------------------------------------------------------------------------------
+
+
+def _length(text: str) -> int | str:
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length or 'auto', got {text!r}") from None
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench goodput``."""
-    ap.add_argument("--rate", type=float, default=2400.0, help="line rate, bit/s (default 2400)")
-    ap.add_argument("--delay", type=float, default=1.3, help="one-way delay, s (default 1.3)")
-    ap.add_argument("--ber", type=float, default=1e-4, help="byte error rate (default 1e-4)")
-    ap.add_argument(
-        "--window", type=int, action="append", help="window(s) to measure (default: 31 and 1)"
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--full", action="store_true", help="the whole designed grid (default)")
+    mode.add_argument("--quick", action="store_true", help="the base row and a few neighbours")
+    mode.add_argument(
+        "--sweep",
+        action="append",
+        choices=sorted(SWEEPS),
+        metavar="NAME",
+        help=f"run only these sweeps (repeatable): {', '.join(SWEEPS)}",
     )
-    ap.add_argument("--max-len", type=int, default=128)
-    ap.add_argument("--size", type=int, default=48_000, help="payload bytes per point")
-    ap.add_argument("--payload", choices=["binary", "text"], default="binary")
-    ap.add_argument("--eight-bit", action="store_true", help="8-bit-clean profile")
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
+    mode.add_argument(
+        "--from-json", type=Path, metavar="FILE", help="plot or print saved rows; run nothing"
+    )
+    custom = ap.add_argument_group(
+        "custom points (cross product of the values given; the base point supplies the rest)"
+    )
+    custom.add_argument("--rate", type=int, action="append", help="line rate, bit/s")
+    custom.add_argument("--delay", type=float, action="append", help="one-way delay, s")
+    custom.add_argument("--ber", type=float, action="append", help="byte error rate")
+    custom.add_argument("--burst", action="store_true", help="add Gilbert-Elliott bursts")
+    custom.add_argument("--window", type=int, action="append", help="window, 1..31")
+    custom.add_argument(
+        "--max-len", type=_length, action="append", help="max packet length, or 'auto'"
+    )
+    custom.add_argument("--payload", choices=["binary", "text", "commands"], action="append")
+    custom.add_argument("--profile", choices=sorted(PROFILES), action="append")
+    custom.add_argument("--eight-bit", action="store_true", help="same as --profile 8bit")
+    ap.add_argument(
+        "--size", type=int, help="payload bytes per point (default: sized for steady state)"
+    )
+    ap.add_argument("--seed", type=int, default=1, help="payload and line seed (default 1)")
+    ap.add_argument(
+        "--jobs", type=int, default=min(2, cpu_count()), help="worker processes (default 2)"
+    )
+    ap.add_argument("--json", action="store_true", help="print the rows as a JSON array only")
+    ap.add_argument("--output", type=Path, metavar="FILE", help="also write the rows here")
+    ap.add_argument(
+        "--plot", type=Path, metavar="FILE.png", help="efficiency vs delay and vs error rate"
+    )
+    ap.add_argument("--plot-delay", type=Path, metavar="FILE.png", help="the delay view alone")
+    ap.add_argument("--plot-ber", type=Path, metavar="FILE.png", help="the error-rate view alone")
+
+
+def _custom_grid(args: argparse.Namespace) -> list[tuple[Point, list[str]]] | None:
+    """The cross product of the custom point options, or None if none was given."""
+    profiles = list(args.profile or [])
+    if args.eight_bit:
+        profiles.append("8bit")
+    given = (args.rate, args.delay, args.ber, args.window, args.max_len, args.payload)
+    if not any(given) and not profiles and not args.burst:
+        return None
+    points: list[Point] = []
+    for rate, delay, ber, window, length, kind, prof in itertools.product(
+        args.rate or [BASE.baud],
+        args.delay or [BASE.delay],
+        args.ber or [BASE.ber],
+        args.window or [BASE.window],
+        args.max_len or [BASE.max_len],
+        args.payload or [BASE.payload],
+        profiles or [BASE.profile],
+    ):
+        p = replace(
+            BASE,
+            baud=rate,
+            delay=delay,
+            ber=ber,
+            burst=args.burst,
+            window=window,
+            payload=kind,
+            profile=prof,
+            size=args.size,
+            seed=args.seed,
+        )
+        if length == "auto":
+            n = auto_packet_length(rate, delay, ber, window=window, profile=prof, burst=args.burst)
+            p = replace(p, max_len=n, auto_len=True)
+        else:
+            p = replace(p, max_len=int(length))
+        points.append(p)
+    return [(p, ["custom"]) for p in dict.fromkeys(points)]
+
+
+def _print_table(rows: Sequence[dict[str, Any]]) -> None:
+    print(
+        "virtual time (exact, machine-independent); goodput and limit in payload bytes/s\n"
+        f"{'baud':>5} {'delay':>5} {'errors':>7} {'win':>3} {'len':>5} {'payload':>8} "
+        f"{'profile':>9} {'bytes':>7} {'seconds':>8} {'goodput':>8} {'eff':>6} "
+        f"{'limit':>6} {'ratio':>6} {'rtx':>4} {'tmo':>4}"
+    )
+    for r in rows:
+        errors = "burst" if r["burst"] else f"{r['byte_error_rate']:g}"
+        length = f"{r['max_packet_len']}{'a' if r['length_policy'] == 'auto' else ''}"
+        window = f"{r['window']}{'*' if r['default_window'] else ''}"
+        flag = "" if r["ok"] and r["complete"] else ("  INCOMPLETE" if r["ok"] else "  MISMATCH")
+        print(
+            f"{r['baud']:>5} {r['one_way_delay_s']:>5g} {errors:>7} {window:>3} {length:>5} "
+            f"{r['payload']:>8} {r['profile']:>9} {r['payload_bytes']:>7} {r['seconds']:>8.1f} "
+            f"{r['goodput_Bps']:>8.1f} {r['efficiency']:>6.3f} {r['limit_efficiency']:>6.3f} "
+            f"{r['ratio_to_limit']:>6.3f} {r['retransmissions']:>4} {r['timeouts']:>4}{flag}"
+        )
+    print("* default window; a: automatic packet length; eff = goodput / line bytes/s")
 
 
 def main(args: argparse.Namespace) -> int:
-    """Entry point for the CLI."""
-    windows: Sequence[int] = args.window or [31, 1]
-    results = [
-        run_transfer(
-            window=w,
-            rate=args.rate,
-            delay=args.delay,
-            byte_error_rate=args.ber,
-            size=args.size,
-            max_len=args.max_len,
-            payload_kind=args.payload,
-            eight_bit=args.eight_bit,
-            seed=args.seed,
-        )
-        for w in windows
-    ]
+    """Entry point of ``linksim bench goodput``."""
+    if args.from_json is not None:
+        rows: list[dict[str, Any]] = json.loads(args.from_json.read_text())
+    else:
+        grid = _custom_grid(args)
+        if grid is None:
+            if args.quick:
+                sweeps: Sequence[Any] = [("quick", QUICK[1])]
+            else:
+                sweeps = args.sweep or list(SWEEPS)
+            grid = build_grid(sweeps, size=args.size, seed=args.seed)
+        rows = run_grid(grid, jobs=args.jobs, progress=not args.json and sys.stderr.isatty())
+    missing = [k for k in ROW_KEYS if rows and k not in rows[0]]
+    if missing:
+        print(f"rows lack required keys: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    if args.output is not None:
+        args.output.write_text(json.dumps(rows, indent=1) + "\n")
     if args.json:
-        json.dump({"benchmark": "goodput", "results": [asdict(r) for r in results]}, sys.stdout)
+        json.dump(rows, sys.stdout)
         sys.stdout.write("\n")
-        return 0 if all(r.ok for r in results) else 1
-    print(
-        f"line {args.rate:g} bit/s, one-way delay {args.delay:g} s, byte error rate {args.ber:g}, "
-        f"{args.size} bytes of {args.payload}, packets of {args.max_len}"
-    )
-    for r in results:
-        print(
-            f"  window {r.window:2d}: {r.goodput:8.1f} B/s of {r.theoretical:.1f} theoretical "
-            f"({100 * r.efficiency:5.1f} %), {r.seconds:.0f} s simulated, "
-            f"{r.retransmissions} retransmissions, {r.timeouts} timeouts, "
-            f"{'exact' if r.ok else 'DATA MISMATCH'}"
-        )
-    if len(results) >= 2 and results[-1].goodput > 0:
-        print(f"  ratio first/last: {results[0].goodput / results[-1].goodput:.2f}x")
-    return 0 if all(r.ok for r in results) else 1
+    else:
+        _print_table(rows)
+    if args.plot or args.plot_delay or args.plot_ber:
+        from ._plot import PlotUnavailable, plot_ber, plot_both, plot_delay
+
+        try:
+            if args.plot:
+                plot_both(rows, args.plot)
+            if args.plot_delay:
+                plot_delay(rows, args.plot_delay)
+            if args.plot_ber:
+                plot_ber(rows, args.plot_ber)
+        except PlotUnavailable as exc:
+            print(f"linksim bench goodput: {exc}", file=sys.stderr)
+            return 2
+    return 0 if all(r["ok"] for r in rows) else 1

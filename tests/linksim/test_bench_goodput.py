@@ -1,0 +1,177 @@
+"""The goodput benchmark runs on a tiny grid and writes valid JSON rows (speed is not asserted).
+
+The figures themselves are virtual-time and exact, but they are the
+benchmark's business; these tests check the contract (the row keys, the grid
+design, the limit formula, the optional plot) in a few seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from linksim._bench_grid import (
+    BASE,
+    QUICK,
+    ROW_KEYS,
+    SWEEPS,
+    Point,
+    auto_packet_length,
+    build_grid,
+    command_records,
+    default_window,
+    run_point,
+)
+from linksim._bench_transfer import BENCH_BURST, packet_error_probability
+from linksim._config import DirectionConfig, GilbertElliott
+from linksim._impair import LinkDirection
+
+TINY = [
+    "--rate",
+    "9600",
+    "--delay",
+    "0",
+    "--delay",
+    "0.27",
+    "--ber",
+    "0",
+    "--ber",
+    "1e-3",
+    "--window",
+    "4",
+    "--window",
+    "1",
+    "--size",
+    "2500",
+    "--jobs",
+    "1",
+]
+
+
+def _bench(*args: str) -> subprocess.CompletedProcess[bytes]:
+    return subprocess.run(
+        [sys.executable, "-m", "linksim", "bench", "goodput", *args],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+
+
+def test_json_rows_have_the_issue_keys_and_are_consistent() -> None:
+    rows = json.loads(_bench(*TINY, "--json").stdout)
+    assert isinstance(rows, list)
+    assert len(rows) == 2 * 2 * 2  # delays x error rates x windows
+    for r in rows:
+        assert list(r)[: len(ROW_KEYS)] == list(ROW_KEYS)
+        assert r["ok"]
+        assert r["complete"]
+        assert r["payload_bytes"] == 2500
+        assert r["line_Bps"] == 960.0
+        assert r["goodput_Bps"] == pytest.approx(2500 / r["seconds"], rel=1e-3)
+        assert r["efficiency"] == pytest.approx(r["goodput_Bps"] / 960.0, abs=1e-4)
+        assert r["ratio_to_limit"] == pytest.approx(
+            r["efficiency"] / r["limit_efficiency"], abs=1e-3
+        )
+        assert 0 < r["limit_efficiency"] < 1
+        assert r["burst"] is None
+    # Errors cost retransmissions; a clean line costs none.
+    assert all(r["retransmissions"] == 0 for r in rows if r["byte_error_rate"] == 0)
+    # Stop-and-wait over 0.27 s one way is far slower than window 4.
+    slow = {(r["window"], r["one_way_delay_s"], r["byte_error_rate"]): r for r in rows}
+    assert slow[(4, 0.27, 0.0)]["goodput_Bps"] > 2.5 * slow[(1, 0.27, 0.0)]["goodput_Bps"]
+
+
+def test_output_file_and_text_table(tmp_path: Path) -> None:
+    out = tmp_path / "rows.json"
+    text = _bench(*TINY[:4], "--size", "1500", "--jobs", "1", "--output", str(out)).stdout
+    assert b"virtual time" in text
+    rows = json.loads(out.read_text())
+    assert [r["one_way_delay_s"] for r in rows] == [0.0]
+    assert rows[0]["window"] == BASE.window
+    assert rows[0]["default_window"]
+
+
+def test_plot_writes_png(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    rows = tmp_path / "rows.json"
+    rows.write_text(_bench(*TINY, "--json").stdout.decode())
+    png = tmp_path / "g.png"
+    delay = tmp_path / "d.png"
+    _bench("--from-json", str(rows), "--plot", str(png), "--plot-delay", str(delay))
+    for path in (png, delay):
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    from linksim import _plot
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    row = run_point(Point(9600, 0.0, 0.0, False, 4, 128, size=500))
+    rows = [row, {**row, "one_way_delay_s": 0.27}]
+    with pytest.raises(_plot.PlotUnavailable, match=r"telelink\[plot\]"):
+        _plot.plot_delay(rows, Path("unused.png"))
+
+
+def test_grid_design_covers_the_issue() -> None:
+    full = build_grid(list(SWEEPS))
+    points = [p for p, _ in full]
+    assert len(points) == len(set(points))
+    assert BASE in points
+    assert "ofat" in dict(full)[BASE]
+    assert {p.baud for p in points} == {1200, 2400, 9600, 19200}
+    assert {p.delay for p in points} == {0.0, 0.27, 1.3, 2.5}
+    assert {(p.ber, p.burst) for p in points} >= {
+        (0.0, False),
+        (1e-5, False),
+        (1e-4, False),
+        (1e-3, False),
+        (0.0, True),
+    }
+    assert {p.window for p in points} >= {1, 4, 8, 16, 31, default_window()}
+    assert {p.max_len for p in points} >= {94, 128, 512, 2048}
+    assert {p.payload for p in points} == {"binary", "text", "commands"}
+    assert {p.profile for p in points} == {"printable", "8bit"}
+    # The paper's configuration is its own series.
+    paper = [p for p, s in full if "paper" in s]
+    assert paper
+    assert all(p.window == 1 and p.max_len == 128 for p in paper)
+    # The quick grid holds the issue's base row.
+    assert BASE in [p for p, _ in build_grid([("quick", QUICK[1])])]
+
+
+def test_limit_formula_pieces() -> None:
+    # Independent errors: 1 - (1 - p)^n.
+    assert packet_error_probability(129, 1e-4) == pytest.approx(1 - (1 - 1e-4) ** 129)
+    # A burst chain whose two states hit alike is independent errors.
+    same = GilbertElliott(p_good_to_bad=0.01, p_bad_to_good=0.2, error_good=1e-3, error_bad=1e-3)
+    assert packet_error_probability(129, 0.0, same) == pytest.approx(1 - (1 - 1e-3) ** 129)
+    # The bench's bursts: the formula agrees with the engine's own chain, counted
+    # over 20 000 packets of 129 bytes (about 130 hit: a 25 % band is > 3 sigma).
+    n, packets = 129, 20_000
+    p = packet_error_probability(n, 0.0, BENCH_BURST)
+    line = LinkDirection(DirectionConfig(burst=BENCH_BURST), seed=5)
+    sent = bytes(n * packets)
+    line.send(sent, 0.0)
+    got = np.frombuffer(line.receive(1.0), dtype=np.uint8).reshape(packets, n)
+    hit = int(got.any(axis=1).sum())
+    assert math.isclose(hit / packets, p, rel_tol=0.25), (hit, p * packets)
+
+
+def test_command_records_are_fixed_size_and_deterministic() -> None:
+    data = command_records(216 * 3 + 10, seed=2)
+    assert len(data) == 216 * 3 + 10
+    assert data[:4] == data[216:220] == b"TLCP"
+    assert data == command_records(216 * 3 + 10, seed=2)
+
+
+def test_auto_packet_length_follows_errors_and_window() -> None:
+    # Frequent errors want short packets; a fast long-delay line with a capped
+    # window wants long ones.
+    assert auto_packet_length(2400, 1.3, 1e-3, window=31) <= 128
+    assert auto_packet_length(19200, 1.3, 1e-5, window=31) >= 512
