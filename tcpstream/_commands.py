@@ -135,6 +135,10 @@ class FailureReason(enum.IntEnum):
     QUEUE_FULL = 35
     TERMINATING = 36
     """The session is ending; no new commands are taken."""
+    EXPIRED = 37
+    """The request id is at or below the highest the arm has taken from this
+    controller but no longer in its exactly-once memory: not run now, because it
+    may have run before.  Send it again under a new request id if it should run."""
 
 
 class FeedbackSlot(enum.IntEnum):

@@ -1,0 +1,510 @@
+"""The controller's async client: pipelined commands, telemetry, reconnect with resume.
+
+::
+
+    async with tcpstream.connect_tcp("arm.example", 7010, key=KEY, identity="ops-1") as arm:
+        reply = await arm.move_joints([0, 0.5, -0.3, 0, 0.2, 0])
+        first = await arm.submit(tcpstream.commands.open_fingers())  # pipelined
+        second = await arm.submit(tcpstream.commands.close_fingers())
+        await first.completed(); await second.completed()
+
+Every command gets a request id (1, 2, 3, ... within this client's
+incarnation).  If the link breaks, the client reconnects (when it was given a
+way to: a stream factory) and re-sends every command whose outcome it has not
+seen, under the *same* request id: the arm answers those from its memory or
+attaches to the one still running, so nothing runs twice.  Waits are bounded
+by the protocol itself: a dead link is detected within the arm's dead time,
+and reconnection is attempted a bounded number of times; every wait is also
+cancellable by the caller (``trio.move_on_after``).
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from types import TracebackType
+
+import trio
+
+from . import _builders as build
+from ._commands import (
+    Command,
+    CommandCode,
+    CommandFailed,
+    CommandResult,
+    Feedback,
+    validate_arguments,
+)
+from ._connection import ClientConnection
+from ._errors import AuthenticationFailed, LocalProtocolError, Refused, SessionClosed
+from ._events import (
+    Accepted,
+    CloseReason,
+    Completed,
+    ControllerIdentity,
+    Event,
+    Failed,
+    Granted,
+    PacketRejected,
+    RefusalReceived,
+    Role,
+    SessionEnded,
+    SessionParameters,
+    TelemetryReceived,
+)
+from ._pump import Pump
+
+__all__ = ["ArmClient", "CommandHandle", "StreamFactory"]
+
+log = logging.getLogger(__name__)
+
+StreamFactory = Callable[[], Awaitable[trio.abc.Stream]]
+
+TELEMETRY_BUFFER = 16
+"""Telemetry samples buffered per subscriber; a slower reader loses the newest
+(counted) rather than making the connection wait."""
+
+_FINAL_REASONS = frozenset(
+    {
+        CloseReason.NORMAL,
+        CloseReason.TERMINATED,
+        CloseReason.REFUSED,
+        CloseReason.AUTHENTICATION,
+        CloseReason.SHUTDOWN,
+        CloseReason.TAKEN_OVER,
+    }
+)
+"""Session ends after which reconnecting would be wrong."""
+
+
+class CommandHandle:
+    """One submitted command: await :meth:`accepted`, then :meth:`completed`."""
+
+    def __init__(self, request_id: int, command: Command) -> None:
+        self.request_id = request_id
+        self.command = command
+        self.position: int | None = None
+        """Queue position reported by the arm's ACCEPTED (None until then)."""
+        self.result: CommandResult | None = None
+        self.error: Exception | None = None
+        self.sent = False
+        self._accepted = trio.Event()
+        self._done = trio.Event()
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    async def accepted(self) -> int:
+        """Wait until the arm queued the command; its queue position.
+
+        Raises the command's failure if it failed before being queued.
+        """
+        await self._accepted.wait()
+        if self.position is None:
+            assert self.error is not None
+            raise self.error
+        return self.position
+
+    async def completed(self) -> CommandResult:
+        """Wait for the outcome; raises :class:`CommandFailed` or :class:`SessionClosed`."""
+        await self._done.wait()
+        if self.error is not None:
+            raise self.error
+        assert self.result is not None
+        return self.result
+
+    def _accept(self, position: int) -> None:
+        self.position = position
+        self._accepted.set()
+
+    def _finish(self, result: CommandResult | None, error: Exception | None) -> None:
+        if self._done.is_set():
+            return
+        self.result, self.error = result, error
+        self._accepted.set()
+        self._done.set()
+
+
+class ArmClient:
+    """A controller (or observer) connection to an arm.  Use ``async with``.
+
+    Prefer :func:`connect_tcp` / :func:`connect_stream` to building one.
+    ``stream_factory`` opens a fresh stream; it is called for the first
+    connection and for every reconnection (``reconnect_attempts`` in a row at
+    most, ``reconnect_delay`` apart, doubling).
+    """
+
+    def __init__(
+        self,
+        stream_factory: StreamFactory,
+        *,
+        identity: str = "controller",
+        key: bytes | None = None,
+        role: Role = Role.CONTROLLER,
+        reconnect_attempts: int = 3,
+        reconnect_delay: float = 0.5,
+        handshake_timeout: float = 30.0,
+        max_in_flight: int = 32,
+        incarnation: int | None = None,
+        nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+    ) -> None:
+        self._factory = stream_factory
+        self.identity = ControllerIdentity(
+            identity, incarnation if incarnation is not None else secrets.randbits(64)
+        )
+        self._key = key
+        self.role = role
+        self._reconnect_attempts = reconnect_attempts
+        self._reconnect_delay = reconnect_delay
+        self._handshake_timeout = handshake_timeout
+        self._nonce_source = nonce_source
+        # In-flight commands, bounded like the arm's queue: submit() waits for room.
+        self._slots = trio.Semaphore(max_in_flight)
+        self._pending: dict[int, CommandHandle] = {}
+        self._next_id = 1
+        self._pump: Pump | None = None
+        self._conn: ClientConnection | None = None
+        self._ready = trio.Event()
+        self._closed = trio.Event()
+        self._failure: Exception | None = None
+        self._ending = False
+        self._subscribers: set[trio.MemorySendChannel[Feedback]] = set()
+        self.parameters: SessionParameters | None = None
+        self.latest_telemetry: Feedback | None = None
+        self.reconnects = 0
+        self.telemetry_dropped = 0
+        self.rejected_by_arm = 0
+        self._nursery: trio.Nursery | None = None
+
+    # --- lifetime -------------------------------------------------------------
+
+    async def __aenter__(self) -> ArmClient:
+        self._nursery_cm = trio.open_nursery()
+        self._nursery = await self._nursery_cm.__aenter__()
+        self._nursery.start_soon(self._connection_loop)
+        try:
+            # Granted, or the first session failed (refused, bad key, no answer).
+            async with trio.open_nursery() as wait:
+                wait.start_soon(_set_when, self._ready, wait.cancel_scope)
+                wait.start_soon(_set_when, self._closed, wait.cancel_scope)
+            if not self._ready.is_set():
+                raise self._failure or SessionClosed("the arm closed the connection")
+        except BaseException as exc:
+            self._nursery.cancel_scope.cancel()
+            await self._nursery_cm.__aexit__(type(exc), exc, exc.__traceback__)
+            raise
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        if exc is None:
+            await self.aclose()
+        else:
+            self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc_type}")
+        assert self._nursery is not None
+        self._nursery.cancel_scope.cancel()
+        return await self._nursery_cm.__aexit__(exc_type, exc, tb)
+
+    async def aclose(self, *, wait: bool = True) -> None:
+        """Finish: wait for outstanding commands (``wait``), say BYE, close the stream."""
+        if wait:
+            for handle in list(self._pending.values()):
+                await handle._done.wait()
+        self._close_now(CloseReason.NORMAL, "controller done")
+        pump = self._pump
+        if pump is not None:
+            with trio.move_on_after(5.0):
+                await pump.wait_done()
+
+    def _close_now(self, reason: CloseReason, message: str) -> None:
+        self._ending = True
+        if self._pump is not None:
+            self._pump.close(reason, message)
+        self._fail_pending(SessionClosed("the client closed the session", reason))
+
+    # --- the connection loop ----------------------------------------------------
+
+    async def _connection_loop(self) -> None:
+        granted_once = False
+        try:
+            stream = await self._factory()
+        except OSError as exc:
+            self._failure = SessionClosed(f"cannot reach the arm: {exc}")
+            self._closed.set()
+            return
+        try:
+            while True:
+                ended = await self._run_session(stream)
+                granted_once = granted_once or self.parameters is not None
+                if not granted_once or self._ending or ended.reason in _FINAL_REASONS:
+                    if self._failure is None and not granted_once:
+                        self._failure = SessionClosed(f"no session: {ended.message}", ended.reason)
+                    break
+                next_stream = await self._reconnect()
+                if next_stream is None:
+                    break
+                stream = next_stream
+        finally:
+            self._closed.set()
+            self._fail_pending(SessionClosed("the session ended and could not be resumed"))
+            for ch in self._subscribers:
+                ch.close()
+
+    async def _run_session(self, stream: trio.abc.Stream) -> SessionEnded:
+        now = trio.current_time()
+        conn = ClientConnection(
+            self.identity,
+            role=self.role,
+            key=self._key,
+            handshake_timeout=self._handshake_timeout,
+            now=now,
+            nonce_source=self._nonce_source,
+        )
+        ended: list[SessionEnded] = []
+        self._conn = conn
+        pump = Pump(stream, conn, lambda ev: self._on_event(ev, ended))
+        self._pump = pump
+        conn.connect(now)
+        pump.kick()
+        await pump.run()
+        self._ready = trio.Event()
+        return ended[0] if ended else SessionEnded(CloseReason.PEER_EOF, "stream ended", True)
+
+    async def _reconnect(self) -> trio.abc.Stream | None:
+        delay = self._reconnect_delay
+        for attempt in range(1, self._reconnect_attempts + 1):
+            await trio.sleep(delay)
+            delay *= 2
+            try:
+                stream = await self._factory()
+            except OSError as exc:
+                log.info("reconnect attempt %d failed: %s", attempt, exc)
+                continue
+            self.reconnects += 1
+            return stream
+        return None
+
+    # --- events -----------------------------------------------------------------
+
+    def _on_event(self, event: Event, ended: list[SessionEnded]) -> None:
+        if isinstance(event, Completed):
+            self._resolve(event.request_id, event.result, None)
+        elif isinstance(event, Accepted):
+            handle = self._pending.get(event.request_id)
+            if handle is not None:
+                handle._accept(event.position)
+        elif isinstance(event, Failed):
+            if event.request_id in self._pending:
+                error = CommandFailed(event.reason, event.message, event.aux)
+                self._resolve(event.request_id, None, error)
+            else:
+                self.rejected_by_arm += 1
+                log.warning("the arm rejected a packet: %s %s", event.reason.name, event.message)
+        elif isinstance(event, TelemetryReceived):
+            self._telemetry(event.feedback)
+        elif isinstance(event, Granted):
+            self._granted(event)
+        elif isinstance(event, RefusalReceived):
+            self._failure = Refused(event.reason, event.message)
+        elif isinstance(event, SessionEnded):
+            ended.append(event)
+            if event.reason is CloseReason.AUTHENTICATION and not event.by_peer:
+                self._failure = AuthenticationFailed(event.message)
+        elif isinstance(event, PacketRejected):
+            log.info("dropped a packet from the arm: %s", event.message)
+
+    def _granted(self, event: Granted) -> None:
+        self.parameters = event.parameters
+        pump, conn = self._pump, self._conn
+        assert pump is not None
+        assert conn is not None
+        now = trio.current_time()
+        # Resume: re-send what we have no outcome for, oldest first, same ids.
+        for rid in sorted(self._pending):
+            handle = self._pending[rid]
+            if not handle.sent:
+                continue
+            if handle.position is not None and rid > event.last_request_id:
+                # The arm had queued it but no longer remembers it (restarted, or
+                # forgot us): it may have run.  Say so instead of risking a rerun.
+                self._resolve(
+                    rid,
+                    None,
+                    SessionClosed("the arm lost its memory of this command; outcome unknown"),
+                )
+                continue
+            conn.send_command(rid, handle.command, now)
+        pump.kick()
+        self._ready.set()
+
+    def _resolve(
+        self, request_id: int, result: CommandResult | None, error: Exception | None
+    ) -> None:
+        handle = self._pending.pop(request_id, None)
+        if handle is None:
+            return
+        handle._finish(result, error)
+        if handle.command.code is not CommandCode.EMERGENCY_STOP:
+            self._slots.release()
+
+    def _fail_pending(self, error: SessionClosed) -> None:
+        for rid in sorted(self._pending):
+            self._resolve(rid, None, error)
+
+    def _telemetry(self, feedback: Feedback) -> None:
+        self.latest_telemetry = feedback
+        for ch in self._subscribers:
+            try:
+                ch.send_nowait(feedback)
+            except trio.WouldBlock:
+                self.telemetry_dropped += 1
+
+    # --- commands ---------------------------------------------------------------
+
+    async def submit(self, command: Command) -> CommandHandle:
+        """Queue ``command`` at the arm without waiting for it to run (pipelining).
+
+        Checks the arguments first (raises :class:`CommandFailed` BAD_ARGUMENT
+        before anything crosses the link); waits for room when
+        ``max_in_flight`` commands are outstanding, and for the session during
+        a reconnect.
+        """
+        if self.role is not Role.CONTROLLER:
+            raise LocalProtocolError("an observer cannot command the arm")
+        validate_arguments(command)
+        if command.code is not CommandCode.EMERGENCY_STOP:
+            await self._slots.acquire()
+        try:
+            while not self._ready.is_set():
+                if self._closed.is_set():
+                    raise SessionClosed("the session is closed")
+                with trio.move_on_after(1.0):
+                    await self._ready.wait()
+            if self._next_id >= 2**32:
+                raise LocalProtocolError("request ids exhausted; create a new client")
+        except BaseException:
+            if command.code is not CommandCode.EMERGENCY_STOP:
+                self._slots.release()
+            raise
+        rid = self._next_id
+        self._next_id += 1
+        handle = CommandHandle(rid, command)
+        self._pending[rid] = handle
+        pump, conn = self._pump, self._conn
+        assert pump is not None
+        assert conn is not None
+        conn.send_command(rid, command, trio.current_time())
+        handle.sent = True
+        pump.kick()
+        return handle
+
+    async def send(self, command: Command) -> CommandResult:
+        """Run ``command`` and return its result; raises :class:`CommandFailed` on failure."""
+        handle = await self.submit(command)
+        return await handle.completed()
+
+    async def telemetry(self) -> AsyncIterator[Feedback]:
+        """The arm's state, as it arrives (every N-th control sample), until the session ends."""
+        send, receive = trio.open_memory_channel[Feedback](TELEMETRY_BUFFER)
+        self._subscribers.add(send)
+        try:
+            async with receive:
+                async for feedback in receive:
+                    yield feedback
+        finally:
+            self._subscribers.discard(send)
+
+    def statistics(self) -> dict[str, object]:
+        pump = self._pump
+        return {
+            "pending": len(self._pending),
+            "reconnects": self.reconnects,
+            "telemetry_dropped": self.telemetry_dropped,
+            "rejected_by_arm": self.rejected_by_arm,
+            "connection": pump.conn.statistics() if pump is not None else None,
+        }
+
+    # --- one method per command -------------------------------------------------
+
+    async def reinitialize(self) -> CommandResult:
+        return await self.send(build.reinitialize())
+
+    async def status(self) -> CommandResult:
+        return await self.send(build.status())
+
+    async def open_fingers(self, opening: float = 0.0) -> CommandResult:
+        return await self.send(build.open_fingers(opening))
+
+    async def close_fingers(self) -> CommandResult:
+        return await self.send(build.close_fingers())
+
+    async def move_to(
+        self,
+        p: Sequence[float],
+        s: Sequence[float] | None = None,
+        a: Sequence[float] | None = None,
+    ) -> CommandResult:
+        return await self.send(build.move_to(p, s, a))
+
+    async def move_joints(self, joints: Sequence[float]) -> CommandResult:
+        return await self.send(build.move_joints(joints))
+
+    async def move_joint(self, joint: int, amount: float) -> CommandResult:
+        return await self.send(build.move_joint(joint, amount))
+
+    async def transform_to_pose(self, joints: Sequence[float]) -> CommandResult:
+        return await self.send(build.transform_to_pose(joints))
+
+    async def transform_to_joints(
+        self, p: Sequence[float], s: Sequence[float], a: Sequence[float]
+    ) -> CommandResult:
+        return await self.send(build.transform_to_joints(p, s, a))
+
+    async def squeeze(self, force: float) -> CommandResult:
+        return await self.send(build.squeeze(force))
+
+    async def weigh(self) -> CommandResult:
+        return await self.send(build.weigh())
+
+    async def change_speed(self, fraction: float) -> CommandResult:
+        return await self.send(build.change_speed(fraction))
+
+    async def center_fingers(self) -> CommandResult:
+        return await self.send(build.center_fingers())
+
+    async def terminate(self) -> CommandResult:
+        return await self.send(build.terminate())
+
+    async def move_delta(
+        self,
+        dp: Sequence[float],
+        drot: Sequence[float] = (0.0, 0.0, 0.0),
+        *,
+        pose_change: bool = False,
+    ) -> CommandResult:
+        return await self.send(build.move_delta(dp, drot, pose_change=pose_change))
+
+    async def move_path(
+        self, points: Sequence[Sequence[float]], blend: float = 0.0
+    ) -> CommandResult:
+        return await self.send(build.move_path(points, blend))
+
+    async def emergency_stop(self) -> CommandResult:
+        """Halt now: bypasses the in-flight bound here and the queue at the arm."""
+        return await self.send(build.emergency_stop())
+
+    async def add_obstacle(
+        self, minimum: Sequence[float], maximum: Sequence[float]
+    ) -> CommandResult:
+        return await self.send(build.add_obstacle(minimum, maximum))
+
+
+async def _set_when(event: trio.Event, scope: trio.CancelScope) -> None:
+    await event.wait()
+    scope.cancel()

@@ -1,0 +1,145 @@
+"""Exactly-once memory: what the arm remembers about each controller's request ids.
+
+PROTOCOL.md section 7.  The key is the :class:`~tcpstream.ControllerIdentity`
+(name and incarnation).  A client numbers its commands 1, 2, 3, ... and never
+reuses a number within an incarnation, so for each identity the arm keeps:
+
+* ``highest``: the highest request id it has taken in (kept as long as the
+  identity is remembered at all);
+* the final reply of the last :data:`DEFAULT_MEMORY_SIZE` finished requests;
+* the requests still queued or running (at most the queue size plus one, so
+  never evicted).
+
+A request id is then exactly one of: new (above ``highest``: run it), in
+flight (attach to it), done (answer from memory) or expired (at or below
+``highest`` but forgotten: refuse it with EXPIRED -- never run it, because it
+may have run already).  Nothing here is ever executed twice; the price of the
+bound is that a command re-sent after more than 1024 newer ones finished gets
+EXPIRED instead of its original answer.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from ._commands import CommandCode, CommandResult, FailureReason
+from ._events import ControllerIdentity
+
+__all__ = [
+    "DEFAULT_IDENTITIES",
+    "DEFAULT_MEMORY_SIZE",
+    "Lookup",
+    "RequestMemory",
+    "StoredFailure",
+    "StoredReply",
+    "StoredSuccess",
+]
+
+DEFAULT_MEMORY_SIZE = 1024
+"""Finished request ids remembered per identity.  A reconnect re-sends at most
+the client's in-flight window (32), so 1024 covers many reconnects' worth of
+lost replies; 1024 replies of ~250 bytes are ~250 kB per identity."""
+DEFAULT_IDENTITIES = 16
+"""Controller identities remembered (least recently used forgotten first).  An
+arm has one controller at a time; 16 covers restarts and a few operators."""
+
+
+@dataclass(frozen=True, slots=True)
+class StoredSuccess:
+    code: CommandCode
+    result: CommandResult
+
+
+@dataclass(frozen=True, slots=True)
+class StoredFailure:
+    code: int
+    reason: FailureReason
+    message: str
+    aux: tuple[float, float, float, float]
+
+
+StoredReply = StoredSuccess | StoredFailure
+
+
+class Lookup(enum.Enum):
+    NEW = "new"
+    IN_FLIGHT = "in-flight"
+    DONE = "done"
+    EXPIRED = "expired"
+
+
+class _Record:
+    __slots__ = ("done", "highest", "in_flight")
+
+    def __init__(self) -> None:
+        self.highest = 0
+        self.in_flight: set[int] = set()
+        self.done: OrderedDict[int, StoredReply] = OrderedDict()
+
+
+class RequestMemory:
+    """Bounded per-identity memory of request ids and their final replies."""
+
+    def __init__(
+        self, size: int = DEFAULT_MEMORY_SIZE, identities: int = DEFAULT_IDENTITIES
+    ) -> None:
+        if size < 1 or identities < 1:
+            raise ValueError("memory size and identity count must be >= 1")
+        self.size = size
+        self._identities = identities
+        self._records: OrderedDict[ControllerIdentity, _Record] = OrderedDict()
+
+    def _record(self, identity: ControllerIdentity) -> _Record:
+        rec = self._records.get(identity)
+        if rec is None:
+            rec = self._records[identity] = _Record()
+            # Forget the least recently used identity with nothing in flight.
+            if len(self._records) > self._identities:
+                for old, old_rec in self._records.items():
+                    if not old_rec.in_flight and old is not identity:
+                        del self._records[old]
+                        break
+        self._records.move_to_end(identity)
+        return rec
+
+    def highest(self, identity: ControllerIdentity) -> int:
+        """The highest request id taken in from ``identity`` (0 if none or forgotten)."""
+        rec = self._records.get(identity)
+        return rec.highest if rec is not None else 0
+
+    def lookup(
+        self, identity: ControllerIdentity, request_id: int
+    ) -> tuple[Lookup, StoredReply | None]:
+        """Classify ``request_id``; for DONE also return the stored reply."""
+        rec = self._record(identity)
+        if request_id in rec.in_flight:
+            return Lookup.IN_FLIGHT, None
+        stored = rec.done.get(request_id)
+        if stored is not None:
+            return Lookup.DONE, stored
+        if request_id > rec.highest:
+            return Lookup.NEW, None
+        return Lookup.EXPIRED, None
+
+    def start(self, identity: ControllerIdentity, request_id: int) -> None:
+        """Take in a NEW request id (it is now in flight)."""
+        rec = self._record(identity)
+        if request_id <= rec.highest:
+            raise ValueError(f"request id {request_id} is not new (highest {rec.highest})")
+        rec.highest = request_id
+        rec.in_flight.add(request_id)
+
+    def finish(self, identity: ControllerIdentity, request_id: int, reply: StoredReply) -> None:
+        """Record the final reply of a request (in flight or taken in and refused at once)."""
+        rec = self._record(identity)
+        rec.in_flight.discard(request_id)
+        rec.highest = max(rec.highest, request_id)
+        rec.done[request_id] = reply
+        while len(rec.done) > self.size:
+            rec.done.popitem(last=False)
+
+    def in_flight(self, identity: ControllerIdentity) -> int:
+        rec = self._records.get(identity)
+        return len(rec.in_flight) if rec is not None else 0

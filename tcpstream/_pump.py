@@ -1,0 +1,146 @@
+"""The trio glue: move bytes and time between a stream and a sans-I/O connection.
+
+Three small tasks per connection -- reader, writer, timer -- and nothing else.
+Everything the protocol decides happens in the connection object; the pump
+only feeds it and delivers what it produces.  The writer is its own task so
+that producers (the executor finishing a command, telemetry, a heartbeat) never
+wait for a slow line: they append to the connection and :meth:`Pump.kick`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+
+import trio
+
+from ._connection import _Connection
+from ._events import CloseReason, Event
+from ._packet import PACKET_SIZE
+from ._state import SessionState
+
+__all__ = ["Pump"]
+
+log = logging.getLogger(__name__)
+
+RECEIVE_CHUNK = 16 * PACKET_SIZE
+"""Bytes asked of the stream per read: a burst of pipelined replies in one wake-up."""
+
+MAX_PENDING_BYTES = 256 * PACKET_SIZE
+"""Output waiting for a peer that does not read.  The arm produces at most three
+packets per command (accepted, completed or failed, plus a telemetry slot that
+is skipped while output is pending), and the queue holds 32 commands, so an
+honest peer never gets near 256 packets; past it the peer is not reading and
+the connection is given up rather than letting memory grow."""
+
+CLOSE_TIMEOUT = 5.0
+"""Seconds to let the final BYE drain before the stream is closed regardless."""
+
+
+class Pump:
+    """Runs one connection over one stream until the session is CLOSED."""
+
+    def __init__(
+        self,
+        stream: trio.abc.Stream,
+        conn: _Connection,
+        on_event: Callable[[Event], None],
+    ) -> None:
+        self.stream = stream
+        self.conn = conn
+        self._on_event = on_event
+        self._wake = trio.Event()
+        self._timer_wake = trio.Event()
+        self._sending = False
+        self._done = trio.Event()
+        self.bytes_in = 0
+        self.bytes_out = 0
+
+    @property
+    def idle(self) -> bool:
+        """Nothing being written or waiting: telemetry may go out without delaying replies."""
+        return not self._sending and not self._wake.is_set()
+
+    def kick(self) -> None:
+        """Call after anything that made the connection produce output or move its timer."""
+        self.drain_events()
+        self._wake.set()
+        self._timer_wake.set()
+
+    def drain_events(self) -> None:
+        while (event := self.conn.next_event()) is not None:
+            self._on_event(event)
+
+    def close(self, reason: CloseReason, message: str = "") -> None:
+        """End the session from this side (BYE goes out, then the stream closes)."""
+        self.conn.close(reason, trio.current_time(), message)
+        self.kick()
+
+    async def run(self) -> None:
+        """Pump until the session is CLOSED and its last packet is written; close the stream."""
+        try:
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(self._reader)
+                nursery.start_soon(self._timer)
+                await self._writer()
+                nursery.cancel_scope.cancel()
+        finally:
+            with trio.move_on_after(CLOSE_TIMEOUT) as scope:
+                scope.shield = True
+                await self.stream.aclose()
+            self._done.set()
+
+    async def _reader(self) -> None:
+        conn = self.conn
+        while conn.state is not SessionState.CLOSED:
+            try:
+                data = bytes(await self.stream.receive_some(RECEIVE_CHUNK))
+            except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                log.debug("stream failed: %r", exc)
+                data = b""
+            self.bytes_in += len(data)
+            conn.receive_data(data, trio.current_time())
+            self.kick()
+            if not data:
+                return
+
+    async def _timer(self) -> None:
+        conn = self.conn
+        while conn.state is not SessionState.CLOSED:
+            # Fresh event, then the deadline, with no checkpoint between: a kick
+            # that moves the deadline cannot slip in unseen.
+            self._timer_wake = trio.Event()
+            deadline = conn.get_timer()
+            with trio.move_on_at(math.inf if deadline is None else deadline):
+                await self._timer_wake.wait()
+                continue
+            conn.handle_timer(trio.current_time())
+            self.kick()
+
+    async def _writer(self) -> None:
+        conn = self.conn
+        while True:
+            await self._wake.wait()
+            self._wake = trio.Event()
+            data = conn.data_to_send()
+            if data:
+                if len(data) > MAX_PENDING_BYTES:
+                    log.warning("peer is not reading; dropping the connection")
+                    return
+                self._sending = True
+                try:
+                    await self.stream.send_all(data)
+                except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    log.debug("stream failed while sending: %r", exc)
+                    conn.receive_data(b"", trio.current_time())
+                    self.drain_events()
+                    return
+                finally:
+                    self._sending = False
+                self.bytes_out += len(data)
+            if conn.state is SessionState.CLOSED and not self._wake.is_set():
+                return
+
+    async def wait_done(self) -> None:
+        await self._done.wait()

@@ -1,0 +1,537 @@
+"""The arm's server: one executor, one ordered queue, many connections (PROTOCOL.md 7-9).
+
+A :class:`Server` owns what outlives a connection: the executor task and its
+bounded queue, the exactly-once memory, the controller's lease (who holds the
+arm, and until when without hearing from them: the deadman) and telemetry.
+Each connection is a sans-I/O :class:`ServerConnection` driven by a
+:class:`Pump`; the server reacts to its events.
+
+Seed 003 section 9.1: "When the session is over, both agents will close their
+end of the socket stream, and the manipulator will reset and listen for
+further connection requests."  Here a session ends with TERMINATE (clean), a
+BYE, the deadman, or a broken stream; the arm is halted (never moved) when a
+controller is lost, and the listener keeps accepting throughout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass
+from types import TracebackType
+
+import trio
+
+from ._commands import (
+    Command,
+    CommandCode,
+    CommandFailed,
+    CommandResult,
+    Executor,
+    FailureReason,
+)
+from ._config import ServerConfig
+from ._connection import ServerConnection
+from ._events import (
+    CloseReason,
+    CommandReceived,
+    ControllerIdentity,
+    ControlRequested,
+    EmergencyStopRequested,
+    Event,
+    PacketRejected,
+    RefuseReason,
+    Role,
+    SessionEnded,
+    SessionParameters,
+)
+from ._memory import Lookup, RequestMemory, StoredFailure, StoredReply, StoredSuccess
+from ._pump import Pump
+
+__all__ = ["Server", "ServerStatistics"]
+
+log = logging.getLogger(__name__)
+_ZERO4 = (0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ServerStatistics:
+    """What an operator console shows about the arm's server."""
+
+    connections: int
+    """Open connections now (controller, observers, handshakes)."""
+    connections_total: int
+    refused: int
+    controller: str | None
+    """Name of the controller holding the arm, or None."""
+    controller_connected: bool
+    queue_depth: int
+    running: CommandCode | None
+    commands_accepted: int
+    commands_completed: int
+    commands_failed: int
+    duplicates_answered: int
+    """Re-sent request ids answered from memory or attached to the running one."""
+    expired: int
+    emergency_stops: int
+    deadman_trips: int
+    bad_packets: int
+    telemetry_sent: int
+    telemetry_skipped: int
+    """Samples not sent because the connection was still writing (slow line)."""
+
+
+@dataclass(slots=True)
+class _Job:
+    identity: ControllerIdentity
+    request_id: int
+    command: Command
+
+
+class _Link:
+    """One connection as the server sees it."""
+
+    def __init__(self, server: Server, stream: trio.abc.Stream) -> None:
+        cfg = server.config
+        self.conn = ServerConnection(
+            server.parameters,
+            key=cfg.key,
+            handshake_timeout=cfg.handshake_time(),
+            now=trio.current_time(),
+            nonce_source=cfg.nonce_source,
+        )
+        self.pump = Pump(stream, self.conn, lambda ev: server._on_event(self, ev))
+        self.identity: ControllerIdentity | None = None
+        self.role: Role | None = None
+        self.granted = trio.Event()
+
+
+class Server:
+    """The arm's command server.  Use as ``async with Server(executor, config) as server:``.
+
+    Inside the block, :meth:`serve_stream` runs one session over any trio
+    stream (TCP, TLS, a serial socket), :meth:`serve_tcp` listens on a port.
+    The same server across connections is what makes a re-sent command
+    answer from memory instead of running twice.
+    """
+
+    def __init__(self, executor: Executor, config: ServerConfig | None = None) -> None:
+        self.executor = executor
+        self.config = config or ServerConfig()
+        hb, dead = self.config.timing()
+        rate = executor.control_rate_hz
+        period = self.config.telemetry_every / rate if self.config.telemetry_every else 0.0
+        self.parameters = SessionParameters(hb, dead, period, self.config.memory_size)
+        self.memory = RequestMemory(self.config.memory_size, self.config.memory_identities)
+        # Bounded by config.queue_size (QUEUE_FULL beyond it).
+        self._queue: deque[_Job] = deque()
+        self._queue_wake = trio.Event()
+        self._running: _Job | None = None
+        self._running_scope: trio.CancelScope | None = None
+        self._cancel_reason = FailureReason.STOPPED
+        self._links: set[_Link] = set()
+        self._holder: ControllerIdentity | None = None
+        self._holder_link: _Link | None = None
+        self._holder_heard = 0.0
+        self._terminating = False
+        self._lease_wake = trio.Event()
+        self._nursery: trio.Nursery | None = None
+        self._stats = dict.fromkeys(
+            (
+                "connections_total",
+                "refused",
+                "commands_accepted",
+                "commands_completed",
+                "commands_failed",
+                "duplicates_answered",
+                "expired",
+                "emergency_stops",
+                "deadman_trips",
+                "bad_packets",
+                "telemetry_sent",
+                "telemetry_skipped",
+            ),
+            0,
+        )
+
+    # --- lifetime -------------------------------------------------------------
+
+    async def __aenter__(self) -> Server:
+        self._nursery_cm = trio.open_nursery()
+        self._nursery = await self._nursery_cm.__aenter__()
+        self._nursery.start_soon(self._executor_loop)
+        self._nursery.start_soon(self._deadman_loop)
+        if self.parameters.telemetry_period > 0:
+            self._nursery.start_soon(self._telemetry_loop)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        assert self._nursery is not None
+        self._nursery.cancel_scope.cancel()
+        try:
+            return await self._nursery_cm.__aexit__(exc_type, exc, tb)
+        finally:
+            self._nursery = None
+            # Whatever happens to the server, the arm does not keep moving.
+            self.executor.halt(FailureReason.STOPPED)
+
+    def statistics(self) -> ServerStatistics:
+        holder_link = self._holder_link
+        return ServerStatistics(
+            connections=len(self._links),
+            controller=self._holder.name if self._holder else None,
+            controller_connected=holder_link is not None,
+            queue_depth=len(self._queue),
+            running=self._running.command.code if self._running else None,
+            **self._stats,
+        )
+
+    # --- serving --------------------------------------------------------------
+
+    async def serve_stream(self, stream: trio.abc.Stream) -> None:
+        """Run one session over ``stream`` until it ends; the stream is closed after."""
+        if self._nursery is None:
+            raise RuntimeError("use the server inside 'async with Server(...) as server:'")
+        self._stats["connections_total"] += 1
+        if len(self._links) >= self.config.max_connections:
+            await self._refuse_full(stream)
+            return
+        link = _Link(self, stream)
+        self._links.add(link)
+        try:
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(self._handshake_guard, link, nursery.cancel_scope)
+                await link.pump.run()
+                nursery.cancel_scope.cancel()
+        finally:
+            self._links.discard(link)
+            if not link.conn.closed:  # cancelled from outside: the session is over
+                link.conn.close(CloseReason.SHUTDOWN, trio.current_time())
+                link.pump.drain_events()
+            self._detach(link)
+
+    async def _handshake_guard(self, link: _Link, scope: trio.CancelScope) -> None:
+        # The connection's own handshake timer needs a writable stream to send its
+        # REFUSE; a TLS handshake or a stuck peer can block that, so bound the
+        # whole thing here as well.
+        with trio.move_on_after(self.config.handshake_time() + 5.0):
+            await link.granted.wait()
+            return
+        if not link.granted.is_set():
+            scope.cancel()
+
+    async def _refuse_full(self, stream: trio.abc.Stream) -> None:
+        self._stats["refused"] += 1
+        conn = ServerConnection(self.parameters, now=trio.current_time())
+        conn.refuse(
+            RefuseReason.SERVER_FULL,
+            f"the arm serves {self.config.max_connections} connections; try again later",
+            trio.current_time(),
+        )
+        with trio.move_on_after(self.config.handshake_time()):
+            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+                await stream.send_all(conn.data_to_send())
+        with trio.move_on_after(1.0) as s:
+            s.shield = True
+            await stream.aclose()
+
+    async def serve_listeners(
+        self,
+        listeners: list[trio.abc.Listener[trio.abc.Stream]],
+        *,
+        task_status: trio.TaskStatus[list[trio.abc.Listener[trio.abc.Stream]]] = (
+            trio.TASK_STATUS_IGNORED
+        ),
+    ) -> None:
+        """Accept and serve connections from ``listeners`` until cancelled."""
+        await trio.serve_listeners(self.serve_stream, listeners, task_status=task_status)
+
+    # --- events from connections ----------------------------------------------
+
+    def _on_event(self, link: _Link, event: Event) -> None:
+        if isinstance(event, CommandReceived):
+            self._submit(link, event.request_id, event.command)
+        elif isinstance(event, EmergencyStopRequested):
+            self._emergency_stop(link, event.request_id)
+        elif isinstance(event, ControlRequested):
+            self._decide(link, event.identity, event.role)
+        elif isinstance(event, PacketRejected):
+            self._stats["bad_packets"] += 1
+            log.info("rejected packet: %s", event.message)
+        elif isinstance(event, SessionEnded):
+            log.info("session ended: %s %s", event.reason.name, event.message)
+            self._detach(link, event.reason)
+
+    def _decide(self, link: _Link, identity: ControllerIdentity, role: Role) -> None:
+        now = trio.current_time()
+        if role is Role.OBSERVER:
+            if not self.config.allow_observers:
+                self._refuse(link, RefuseReason.BUSY, "this arm takes no observers")
+                return
+        elif self._holder is not None and self._holder != identity:
+            self._refuse(
+                link,
+                RefuseReason.BUSY,
+                "another controller holds the arm; retry when it is done, or connect as observer",
+            )
+            return
+        else:
+            old = self._holder_link
+            self._holder, self._holder_link = identity, link
+            if old is not None and old is not link:
+                old.pump.close(CloseReason.TAKEN_OVER, "the same controller connected again")
+            self._lease_wake.set()
+        link.identity, link.role = identity, role
+        link.conn.grant(role, self.memory.highest(identity), now)
+        link.granted.set()
+
+    def _refuse(self, link: _Link, reason: RefuseReason, message: str) -> None:
+        self._stats["refused"] += 1
+        link.conn.refuse(reason, message, trio.current_time())
+        link.granted.set()  # decided: the guard may stand down
+
+    def _detach(self, link: _Link, reason: CloseReason | None = None) -> None:
+        if self._holder_link is not link:
+            return
+        self._holder_link = None
+        self._holder_heard = link.conn.last_heard
+        busy = self._running is not None or bool(self._queue)
+        if reason is CloseReason.SILENCE:
+            self._trip_deadman()
+        elif reason is CloseReason.NORMAL and busy:
+            # The controller said goodbye with work outstanding: nobody is left to
+            # watch it, so stop rather than carry on.
+            self._halt_all(FailureReason.STOPPED, "the controller closed the session")
+            self._release()
+        elif reason in (CloseReason.NORMAL, CloseReason.TERMINATED):
+            self._release()
+        # Otherwise (EOF, broken stream, garbage) the lease runs on: the same
+        # controller may resume within the dead time, else the deadman trips.
+        self._lease_wake.set()
+
+    def _release(self) -> None:
+        self._holder = None
+        self._terminating = False
+        if self._holder_link is not None:
+            self._holder_link = None
+
+    # --- commands ---------------------------------------------------------------
+
+    def _reply(self, identity: ControllerIdentity, request_id: int, reply: StoredReply) -> None:
+        link = self._holder_link
+        if link is None or link.identity != identity or link.conn.closed:
+            return  # kept in memory; a resume asks again
+        now = trio.current_time()
+        if isinstance(reply, StoredSuccess):
+            link.conn.completed(request_id, reply.code, reply.result, now)
+        else:
+            link.conn.failed(request_id, reply.code, reply.reason, reply.message, reply.aux, now)
+        link.pump.kick()
+
+    def _finish(self, identity: ControllerIdentity, request_id: int, reply: StoredReply) -> None:
+        self.memory.finish(identity, request_id, reply)
+        key = "commands_completed" if isinstance(reply, StoredSuccess) else "commands_failed"
+        self._stats[key] += 1
+        self._reply(identity, request_id, reply)
+
+    def _submit(self, link: _Link, request_id: int, command: Command) -> None:
+        identity = link.identity
+        assert identity is not None
+        now = trio.current_time()
+        status, stored = self.memory.lookup(identity, request_id)
+        if status is Lookup.DONE:
+            assert stored is not None
+            self._stats["duplicates_answered"] += 1
+            self._reply(identity, request_id, stored)
+            return
+        if status is Lookup.IN_FLIGHT:
+            self._stats["duplicates_answered"] += 1
+            link.conn.accepted(request_id, command.code, self._position(request_id), now)
+            return
+        if status is Lookup.EXPIRED:
+            self._stats["expired"] += 1
+            link.conn.failed(
+                request_id,
+                command.code,
+                FailureReason.EXPIRED,
+                "request id is older than the arm's memory; not run now (it may have run "
+                "before). Send it again under a new request id if it should run.",
+                _ZERO4,
+                now,
+            )
+            return
+        self.memory.start(identity, request_id)
+        if self._terminating:
+            self._finish(
+                identity,
+                request_id,
+                _failure(command, FailureReason.TERMINATING, "the session is terminating"),
+            )
+            return
+        if len(self._queue) >= self.config.queue_size:
+            self._finish(
+                identity,
+                request_id,
+                _failure(
+                    command,
+                    FailureReason.QUEUE_FULL,
+                    f"{len(self._queue)} commands queued; wait for one to complete",
+                ),
+            )
+            return
+        position = len(self._queue) + (1 if self._running else 0)
+        self._queue.append(_Job(identity, request_id, command))
+        if command.code is CommandCode.TERMINATE:
+            self._terminating = True
+        self._stats["commands_accepted"] += 1
+        link.conn.accepted(request_id, command.code, position, now)
+        self._queue_wake.set()
+
+    def _position(self, request_id: int) -> int:
+        for i, job in enumerate(self._queue):
+            if job.request_id == request_id:
+                return i + (1 if self._running else 0)
+        return 0
+
+    def _emergency_stop(self, link: _Link, request_id: int) -> None:
+        identity = link.identity
+        assert identity is not None
+        status, stored = self.memory.lookup(identity, request_id)
+        if status is Lookup.DONE:
+            assert stored is not None
+            self._stats["duplicates_answered"] += 1
+            self._reply(identity, request_id, stored)
+            return
+        # Halt first, bookkeeping after: the arm stops at once.
+        self.executor.halt(FailureReason.STOPPED)
+        self._stats["emergency_stops"] += 1
+        self._halt_all(FailureReason.STOPPED, "emergency stop")
+        if status is Lookup.NEW:
+            self.memory.start(identity, request_id)
+            result = CommandResult(self.executor.state())
+            self._finish(identity, request_id, StoredSuccess(CommandCode.EMERGENCY_STOP, result))
+
+    def _halt_all(self, reason: FailureReason, why: str) -> None:
+        """Cancel the running command and fail every queued one with ``reason``."""
+        self.executor.halt(reason)
+        if self._running_scope is not None:
+            self._cancel_reason = reason
+            self._running_scope.cancel()
+        while self._queue:
+            job = self._queue.popleft()
+            self._finish(
+                job.identity,
+                job.request_id,
+                _failure(job.command, reason, f"dropped from the queue: {why}"),
+            )
+        self._terminating = False
+
+    def _trip_deadman(self) -> None:
+        self._stats["deadman_trips"] += 1
+        log.warning("deadman: controller %s silent; halting", self._holder)
+        self._halt_all(FailureReason.DEADMAN, "the controller fell silent (deadman)")
+        if self._holder_link is not None:
+            self._holder_link.pump.close(CloseReason.SILENCE, "deadman: controller silent")
+        self._release()
+
+    async def _executor_loop(self) -> None:
+        while True:
+            while not self._queue:
+                await self._queue_wake.wait()
+                self._queue_wake = trio.Event()
+            job = self._queue.popleft()
+            self._running = job
+            try:
+                reply = await self._execute(job)
+            finally:
+                self._running = None
+                self._running_scope = None
+            self._finish(job.identity, job.request_id, reply)
+            if job.command.code is CommandCode.TERMINATE:
+                link = self._holder_link
+                if link is not None and link.identity == job.identity:
+                    link.pump.close(CloseReason.TERMINATED, "terminated; the arm listens again")
+                    self._holder_link = None
+                self._release()
+                self._lease_wake.set()
+
+    async def _execute(self, job: _Job) -> StoredReply:
+        command = job.command
+        if command.code is CommandCode.TERMINATE:
+            return StoredSuccess(command.code, CommandResult(self.executor.state()))
+        with trio.CancelScope() as scope:
+            self._running_scope = scope
+            try:
+                result = await self.executor.execute(command)
+            except CommandFailed as exc:
+                return StoredFailure(command.code, exc.reason, exc.message, exc.aux)
+            except Exception as exc:
+                # The arm's own bug: stop it, report it, keep serving.
+                log.exception("executor failed on %s", command.code.name)
+                self.executor.halt(FailureReason.ARM_FAULT)
+                return _failure(command, FailureReason.ARM_FAULT, f"executor error: {exc!r}")
+            return StoredSuccess(command.code, result)
+        # Cancelled by an emergency stop or the deadman (the contract: halted
+        # within one control sample); make sure, then report why.
+        reason = self._cancel_reason
+        self.executor.halt(reason)
+        return _failure(command, reason, f"halted by {reason.name.lower().replace('_', ' ')}")
+
+    # --- the lease (deadman) and telemetry -------------------------------------------
+
+    def _lease_deadline(self) -> float:
+        if self._holder is None:
+            return math.inf
+        link = self._holder_link
+        heard = link.conn.last_heard if link is not None else self._holder_heard
+        return heard + self.parameters.dead_time
+
+    async def _deadman_loop(self) -> None:
+        # A connected controller's silence is caught by its connection (same
+        # dead time); this loop catches the controller that vanished without a
+        # word and did not come back.
+        while True:
+            self._lease_wake = trio.Event()
+            deadline = self._lease_deadline()
+            with trio.move_on_at(deadline):
+                await self._lease_wake.wait()
+                continue
+            if self._holder is not None and self._holder_link is None:
+                self._trip_deadman()
+            elif self._holder_link is not None:
+                # Connected but silent: its connection ends itself at the same
+                # deadline (SILENCE) -- give its timer a moment to run.
+                await trio.sleep(self.parameters.heartbeat_interval)
+
+    async def _telemetry_loop(self) -> None:
+        every = self.config.telemetry_every
+        period = self.parameters.telemetry_period
+        sample = 0
+        next_at = trio.current_time() + period
+        while True:
+            await trio.sleep_until(next_at)
+            next_at += period
+            sample += every
+            listeners = [ln for ln in self._links if ln.role is not None and not ln.conn.closed]
+            if not listeners:
+                continue
+            state = self.executor.state()
+            now = trio.current_time()
+            for ln in listeners:
+                if ln.pump.idle:
+                    ln.conn.telemetry(sample, state, now)
+                    ln.pump.kick()
+                    self._stats["telemetry_sent"] += 1
+                else:
+                    self._stats["telemetry_skipped"] += 1
+
+
+def _failure(command: Command, reason: FailureReason, message: str) -> StoredFailure:
+    return StoredFailure(command.code, reason, message, _ZERO4)
