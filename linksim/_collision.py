@@ -46,7 +46,9 @@ def segments_hit_boxes(back: Array, front: Array, boxes: Array) -> Array:
     d = (front - back)[..., None, :]
     lo = boxes[:, 0::2]
     hi = boxes[:, 1::2]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # Division by a zero or subnormal component gives +-inf or nan; both are
+    # replaced below (parallel) or order correctly (inf).
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t1 = (lo - b) / d
         t2 = (hi - b) / d
     parallel = d == 0.0

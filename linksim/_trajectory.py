@@ -74,21 +74,25 @@ def quintic_acceleration(u: Array) -> Array:
 
 @dataclass(frozen=True, slots=True)
 class JointMove:
-    """One seed-000 move: ``start + delta * g(k / samples)`` at sample k = 1..samples."""
+    """One seed-000 move: ``start + delta * g(k / samples)`` at sample k = 1..samples.
+
+    The last sample is ``goal`` itself (not ``start + delta``, which may
+    differ from it in the last bit).
+    """
 
     start: Array
-    delta: Array
+    goal: Array
     samples: int
     rate_hz: float
+
+    @property
+    def delta(self) -> Array:
+        return np.asarray(self.goal - self.start, dtype=np.float64)
 
     @property
     def duration(self) -> float:
         """Seconds from start to rest (a whole number of samples)."""
         return self.samples / self.rate_hz
-
-    @property
-    def goal(self) -> Array:
-        return np.asarray(self.start + self.delta, dtype=np.float64)
 
     def at(self, k: int) -> Array:
         """The joint vector at sample ``k`` (0 is the start, ``samples`` the goal)."""
@@ -120,7 +124,9 @@ def plan_joint_move(
     samples = math.ceil(seconds * rate_hz - 1e-9) if seconds > 0 else 0
     if seconds > 0:
         samples = max(samples, 1)
-    return JointMove(np.asarray(start, dtype=np.float64), delta, samples, rate_hz)
+    return JointMove(
+        np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64), samples, rate_hz
+    )
 
 
 def checkpoint_samples(total: int, count: int = CHECKPOINTS) -> list[int]:
@@ -159,7 +165,7 @@ class BlendedPath:
         return self.samples / self.rate_hz
 
     def _phase(self, k: float) -> tuple[int, bool]:
-        """(junction index j, in_blend) for sample time ``k`` (samples, may be fractional)."""
+        """(j, in_blend): in junction j's blend, or on the straight part of segment j."""
         for j, tj in enumerate(self.junction):
             if k <= tj + self.tau:
                 return j, k >= tj - self.tau
@@ -182,8 +188,8 @@ class BlendedPath:
                 self.points[j] + self.velocity[j] * t + 0.5 * self.acceleration(j) * since**2,
                 dtype=np.float64,
             )
-        # Between junction j's blend and junction j + 1's: on segment j + 1.
-        return np.asarray(self.points[j] + self.velocity[j + 1] * t, dtype=np.float64)
+        # Before junction j's blend: on segment j, which ends at points[j].
+        return np.asarray(self.points[j] + self.velocity[j] * t, dtype=np.float64)
 
     def speed(self, k: float) -> Array:
         """The exact velocity (m/s) at sample time ``k``."""
@@ -192,7 +198,7 @@ class BlendedPath:
         if blend:
             since = (k - self.junction[j] + self.tau) / self.rate_hz
             return np.asarray(self.velocity[j] + self.acceleration(j) * since, dtype=np.float64)
-        return np.asarray(self.velocity[j + 1], dtype=np.float64)
+        return np.asarray(self.velocity[j], dtype=np.float64)
 
 
 def plan_path(
