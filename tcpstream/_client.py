@@ -191,9 +191,11 @@ class ArmClient:
                 wait.start_soon(_set_when, self._closed, wait.cancel_scope)
             if not self._ready.is_set():
                 raise self._failure or SessionClosed("the arm closed the connection")
-        except BaseException as exc:
+        except BaseException:
+            # Stop the background task, then raise the failure itself (Refused,
+            # AuthenticationFailed...), not wrapped in an exception group.
             self._nursery.cancel_scope.cancel()
-            await self._nursery_cm.__aexit__(type(exc), exc, exc.__traceback__)
+            await self._nursery_cm.__aexit__(None, None, None)
             raise
         return self
 

@@ -245,13 +245,15 @@ class _Connection:
                 self._handshake_timed_out(now)
             return
         p = self._params
-        if now - self._last_in >= p.dead_time:
+        # Compare with the very sums get_timer() returned: (a + b) - a < b can
+        # happen in floating point, and would spin a timer loop at one instant.
+        if now >= self._last_in + p.dead_time:
             self.close(CloseReason.SILENCE, now, f"nothing heard for {now - self._last_in:.3g} s")
             self._events.append(
                 SessionEnded(CloseReason.SILENCE, "the peer fell silent", by_peer=False)
             )
             return
-        if now - self._last_out >= p.heartbeat_interval:
+        if now >= self._last_out + p.heartbeat_interval:
             self._move(Trigger.HEARTBEAT)
             self._stats["heartbeats_out"] += 1
             self._send(Packet(PacketKind.HEARTBEAT), now)

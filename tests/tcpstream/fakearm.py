@@ -36,6 +36,7 @@ class FakeArm:
         self.executed: list[Command] = []
         self.finished: list[Command] = []
         self.halts: list[FailureReason] = []
+        self.halt_times: list[float] = []
         self.fail: dict[CommandCode, FailureReason] = {}
         self.joints = [0.0] * 6
         self.moving = False
@@ -64,6 +65,10 @@ class FakeArm:
 
     def halt(self, reason: FailureReason) -> None:
         self.halts.append(reason)
+        try:
+            self.halt_times.append(trio.current_time())
+        except RuntimeError:  # halted from outside a trio run (server teardown)
+            self.halt_times.append(float("nan"))
         self.moving = False
 
     def state(self) -> Feedback:

@@ -1,0 +1,53 @@
+"""Test plumbing: virtual time, in-memory streams, a server and clients wired together."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+from typing import Any
+
+import trio
+import trio.testing
+
+from tcpstream import ArmClient, Server, ServerConfig
+
+KEY = b"0123456789abcdef-test-key"
+
+
+def run(fn: Callable[[], Awaitable[None]]) -> None:
+    """Run ``fn`` on a virtual clock that jumps whenever every task is asleep."""
+    trio.run(fn, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+class Wiring:
+    """A running server plus a stream factory that serves each new stream.
+
+    ``client_streams`` keeps every controller-side stream handed out, so a test
+    can break the current one (a forced disconnect).
+    """
+
+    def __init__(self, server: Server, nursery: trio.Nursery) -> None:
+        self.server = server
+        self._nursery = nursery
+        self.client_streams: list[trio.abc.Stream] = []
+
+    async def factory(self) -> trio.abc.Stream:
+        client_end, server_end = trio.testing.memory_stream_pair()
+        self._nursery.start_soon(self.server.serve_stream, server_end)
+        self.client_streams.append(client_end)
+        return client_end
+
+    def client(self, **options: Any) -> ArmClient:
+        return ArmClient(self.factory, **options)
+
+    async def break_link(self) -> None:
+        """Cut the newest connection without a goodbye (both ends see it fail)."""
+        await trio.aclose_forcefully(self.client_streams[-1])
+
+
+@asynccontextmanager
+async def wired(executor: Any, config: ServerConfig | None = None) -> AsyncIterator[Wiring]:
+    async with Server(executor, config) as server, trio.open_nursery() as nursery:
+        wiring = Wiring(server, nursery)
+        yield wiring
+        nursery.cancel_scope.cancel()

@@ -1,0 +1,201 @@
+"""Exactly once across forced reconnects, and the deadman when the controller goes away."""
+
+from __future__ import annotations
+
+import pytest
+import trio
+
+from tcpstream import (
+    PACKET_SIZE,
+    ClientConnection,
+    CloseReason,
+    CommandCode,
+    CommandFailed,
+    ControllerIdentity,
+    FailureReason,
+    PacketKind,
+    ServerConfig,
+    SessionClosed,
+    commands,
+    decode_packet,
+)
+
+from .fakearm import FakeArm
+from .harness import run, wired
+
+PATIENT = ServerConfig(dead_time=30.0)
+"""A deadman long enough that reconnect tests are about memory, not halting."""
+
+
+def test_reconnect_mid_command_attaches_to_the_running_one() -> None:
+    arm = FakeArm(move_time=10.0)
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w, w.client(reconnect_delay=0.5) as c:
+            handle = await c.submit(commands.move_joints([0.2] * 6))
+            await handle.accepted()
+            await trio.sleep(2.0)
+            await w.break_link()
+            result = await handle.completed()
+            assert result.feedback.joints == (0.2,) * 6
+            assert trio.current_time() == pytest.approx(10.0, abs=0.01)
+            assert c.reconnects == 1
+            assert w.server.statistics().duplicates_answered == 1
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINTS) == 1
+
+
+def test_a_reply_lost_with_the_link_is_answered_from_memory() -> None:
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w, w.client(reconnect_delay=3.0) as c:
+            handle = await c.submit(commands.move_joints([0.4] * 6))
+            await handle.accepted()
+            await trio.sleep(0.5)
+            await w.break_link()  # the move finishes at t=1 with nobody connected
+            result = await handle.completed()
+            assert result.feedback.joints == (0.4,) * 6
+            assert trio.current_time() > 3.0  # answered after the reconnect
+            assert w.server.statistics().duplicates_answered == 1
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINTS) == 1
+
+
+def test_many_forced_reconnects_never_run_a_command_twice() -> None:
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w, w.client(reconnect_delay=0.25) as c:
+            handles = [await c.submit(commands.move_joint(1 + i % 6, 0.01)) for i in range(8)]
+
+            async def saboteur() -> None:
+                for _ in range(5):
+                    await trio.sleep(1.3)
+                    await w.break_link()
+
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(saboteur)
+                for h in handles:
+                    await h.completed()
+            assert c.reconnects == 5
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINT) == 8
+    assert [int(c.args[0]) for c in arm.executed] == [1 + i % 6 for i in range(8)]
+
+
+def test_deadman_halts_the_arm_when_the_controller_vanishes() -> None:
+    arm = FakeArm(move_time=100.0)
+    config = ServerConfig(rtt_hint=0.2)  # heartbeat 0.25 s, dead time 1.4 s
+
+    async def main() -> None:
+        async with wired(arm, config) as w, w.client(reconnect_attempts=0) as c:
+            assert c.parameters is not None
+            assert c.parameters.dead_time == pytest.approx(1.4)
+            handle = await c.submit(commands.move_joints([1.0] * 6))
+            await handle.accepted()
+            await trio.sleep(5.0)
+            await w.break_link()
+            with pytest.raises(SessionClosed):
+                await handle.completed()
+            await trio.sleep(3.0)
+            stats = w.server.statistics()
+            assert stats.deadman_trips == 1
+            assert stats.controller is None  # the lease is released: others may connect
+
+    run(main)
+    assert arm.halts[0] is FailureReason.DEADMAN
+    # Heard last within one heartbeat before the break at t=5; halted 1.4 s after that.
+    assert 5.0 + 1.4 - 0.25 <= arm.halt_times[0] <= 5.0 + 1.4
+    assert arm.finished == []
+
+
+def test_deadman_on_silence_while_connected() -> None:
+    """A controller whose stream stays up but who sends nothing (hung program)."""
+    arm = FakeArm(move_time=100.0)
+    config = ServerConfig(rtt_hint=0.2, dead_time=2.0)
+
+    async def main() -> None:
+        async with wired(arm, config) as w:
+            stream = await w.factory()
+            conn = ClientConnection(ControllerIdentity("hung", 7))
+            conn.connect(trio.current_time())
+            await stream.send_all(conn.data_to_send())
+            conn.receive_data(await stream.receive_some(PACKET_SIZE), trio.current_time())
+            assert conn.role is not None  # granted
+            conn.send_command(1, commands.move_joints([1.0] * 6), trio.current_time())
+            await stream.send_all(conn.data_to_send())
+            t0 = trio.current_time()
+            kinds = [PacketKind.GRANT]
+            while True:  # read, never answer, never heartbeat
+                data = await stream.receive_some()
+                if not data:
+                    break
+                for i in range(0, len(data), PACKET_SIZE):
+                    packet = decode_packet(data[i : i + PACKET_SIZE])
+                    kinds.append(packet.kind)
+                    if packet.kind is PacketKind.BYE:
+                        assert packet.status == CloseReason.SILENCE
+                        assert trio.current_time() - t0 == pytest.approx(2.0, abs=1e-6)
+            assert kinds[:2] == [PacketKind.GRANT, PacketKind.ACCEPTED]
+            assert PacketKind.TELEMETRY in kinds  # telemetry doubles as the heartbeat
+            assert kinds[-1] is PacketKind.BYE
+            assert w.server.statistics().deadman_trips == 1
+
+    run(main)
+    assert FailureReason.DEADMAN in arm.halts
+    assert arm.finished == []
+
+
+def test_controller_goodbye_with_work_outstanding_stops_the_arm() -> None:
+    arm = FakeArm(move_time=100.0)
+
+    async def main() -> None:
+        async with wired(arm) as w:
+            async with w.client() as c:
+                handle = await c.submit(commands.move_joints([1.0] * 6))
+                await handle.accepted()
+                await c.aclose(wait=False)
+                with pytest.raises(SessionClosed):
+                    await handle.completed()
+            await trio.sleep(0.1)
+            assert w.server.statistics().controller is None
+
+    run(main)
+    assert arm.halts[0] is FailureReason.STOPPED
+    assert arm.finished == []
+
+
+def test_resent_command_after_emergency_stop_is_not_rerun() -> None:
+    """The e-stop's own request id is remembered too: re-sending it cannot stop later work."""
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w, w.client() as c:
+            stop = await c.emergency_stop()
+            assert stop.feedback is not None
+            follow = await c.submit(commands.move_joint(2, 0.1))
+            await follow.accepted()
+            await w.break_link()
+            await follow.completed()
+            assert w.server.statistics().emergency_stops == 1
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINT) == 1
+
+
+def test_failed_command_is_reported_once_even_when_resent() -> None:
+    arm = FakeArm()
+    arm.fail[CommandCode.CENTER_FINGERS] = FailureReason.NO_OBJECT
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w, w.client() as c:
+            with pytest.raises(CommandFailed) as info:
+                await c.center_fingers()
+            assert info.value.reason is FailureReason.NO_OBJECT
+
+    run(main)
+    assert arm.count(CommandCode.CENTER_FINGERS) == 1

@@ -1,0 +1,184 @@
+"""Whole sessions over in-memory streams on virtual time: server, client and a fake arm."""
+
+from __future__ import annotations
+
+import pytest
+import trio
+
+from tcpstream import (
+    CommandCode,
+    CommandFailed,
+    FailureReason,
+    LocalProtocolError,
+    Refused,
+    RefuseReason,
+    Role,
+    ServerConfig,
+    commands,
+)
+
+from .fakearm import FakeArm
+from .harness import run, wired
+
+
+def test_commands_round_trip_with_feedback_and_aux() -> None:
+    arm = FakeArm(move_time=2.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client(identity="ops") as c:
+            status = await c.status()
+            assert status.feedback.p == (0.5, 0.0, 0.4)
+            t0 = trio.current_time()
+            moved = await c.move_joints([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+            assert trio.current_time() - t0 == pytest.approx(2.0, abs=1e-6)
+            assert moved.feedback.joints == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
+            assert (await c.weigh()).aux == (1.25, 0.0, 0.0, 0.0)
+            arm.fail[CommandCode.SQUEEZE] = FailureReason.NOT_GRASPING
+            with pytest.raises(CommandFailed) as info:
+                await c.squeeze(5.0)
+            assert info.value.reason is FailureReason.NOT_GRASPING
+            assert info.value.aux == (1.0, 2.0, 3.0, 4.0)
+            assert info.value.message == "scripted failure"
+            stats = w.server.statistics()
+            assert stats.commands_completed == 3
+            assert stats.commands_failed == 1
+            assert stats.controller == "ops"
+
+    run(main)
+    assert [c.code for c in arm.executed] == [
+        CommandCode.STATUS,
+        CommandCode.MOVE_JOINTS,
+        CommandCode.WEIGH,
+        CommandCode.SQUEEZE,
+    ]
+
+
+def test_bad_arguments_never_cross_the_link() -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            with pytest.raises(CommandFailed) as info:
+                await c.change_speed(1.5)
+            assert info.value.reason is FailureReason.BAD_ARGUMENT
+            assert info.value.aux[0] == 0.0
+            with pytest.raises(ValueError, match="S and A"):
+                await c.move_to((0.1, 0.2, 0.3), s=(0.0, 1.0, 0.0))
+
+    run(main)
+    assert arm.executed == []
+
+
+def test_pipelined_commands_run_in_order_with_queue_positions() -> None:
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            t0 = trio.current_time()
+            handles = [await c.submit(commands.move_joint(j, 0.1)) for j in (1, 2, 3)]
+            assert [await h.accepted() for h in handles] == [0, 1, 2]
+            results = [await h.completed() for h in handles]
+            assert trio.current_time() - t0 == pytest.approx(3.0, abs=1e-6)
+            assert len(results) == 3
+
+    run(main)
+    assert [c.args[0] for c in arm.executed] == [1.0, 2.0, 3.0]
+
+
+def test_emergency_stop_preempts_a_long_move_and_flushes_the_queue() -> None:
+    arm = FakeArm(move_time=100.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            long_move = await c.submit(commands.move_joints([1.0] * 6))
+            queued = [await c.submit(commands.move_joint(1, 0.1)) for _ in range(2)]
+            await queued[-1].accepted()
+            await trio.sleep(1.0)
+            t0 = trio.current_time()
+            stop = await c.emergency_stop()
+            assert stop.feedback.joints == (0.0,) * 6  # never got there
+            assert trio.current_time() - t0 < 0.01  # no queue to wait behind
+            for handle in (long_move, *queued):
+                with pytest.raises(CommandFailed) as info:
+                    await handle.completed()
+                assert info.value.reason is FailureReason.STOPPED
+            assert w.server.statistics().emergency_stops == 1
+            # The arm takes new commands afterwards.
+            assert (await c.status()).feedback.joints == (0.0,) * 6
+
+    run(main)
+    assert arm.finished[-1].code is CommandCode.STATUS
+    assert [c.code for c in arm.executed] == [CommandCode.MOVE_JOINTS, CommandCode.STATUS]
+    assert arm.halts[0] is FailureReason.STOPPED
+
+
+def test_queue_full_is_a_typed_failure() -> None:
+    arm = FakeArm(move_time=10.0)
+
+    async def main() -> None:
+        async with wired(arm, ServerConfig(queue_size=2)) as w, w.client() as c:
+            handles = [await c.submit(commands.move_joint(1, 0.1)) for _ in range(4)]
+            assert [await h.accepted() for h in handles[:3]] == [0, 1, 2]
+            with pytest.raises(CommandFailed) as info:
+                await handles[3].completed()
+            assert info.value.reason is FailureReason.QUEUE_FULL
+            for h in handles[:3]:
+                await h.completed()
+
+    run(main)
+    assert len(arm.executed) == 3
+
+
+def test_second_controller_is_refused_and_an_observer_gets_telemetry() -> None:
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client(identity="first") as first:
+            with pytest.raises(Refused) as info:
+                async with w.client(identity="second"):
+                    pass
+            assert info.value.reason is RefuseReason.BUSY
+            assert "observer" in info.value.message
+            async with w.client(identity="watcher", role=Role.OBSERVER) as watcher:
+                with pytest.raises(LocalProtocolError):
+                    await watcher.status()
+                await first.move_joints([0.3] * 6)
+                samples = []
+                async for feedback in watcher.telemetry():
+                    samples.append(feedback)
+                    if len(samples) == 3:
+                        break
+                assert samples[-1].joints == (0.3,) * 6
+                assert watcher.latest_telemetry is not None
+            assert w.server.statistics().refused == 1
+
+    run(main)
+
+
+def test_terminate_ends_the_session_and_the_arm_listens_again() -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        async with wired(arm) as w:
+            async with w.client(identity="first") as c:
+                await c.terminate()
+                await trio.sleep(0.1)
+                assert w.server.statistics().controller is None
+            async with w.client(identity="second") as c2:
+                assert (await c2.status()).feedback.p == (0.5, 0.0, 0.4)
+
+    run(main)
+
+
+def test_server_full_refuses_with_a_reason() -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        config = ServerConfig(max_connections=1)
+        async with wired(arm, config) as w, w.client(identity="one"):
+            with pytest.raises(Refused) as info:
+                async with w.client(identity="two", role=Role.OBSERVER):
+                    pass
+            assert info.value.reason is RefuseReason.SERVER_FULL
+
+    run(main)
