@@ -236,8 +236,10 @@ class ArmClient:
         granted_once = False
         try:
             stream = await self._factory()
-        except OSError as exc:
-            self._failure = SessionClosed(f"cannot reach the arm: {exc}")
+        except (OSError, trio.BrokenResourceError) as exc:
+            # Connection refused, no route, a TLS certificate the client does not trust...
+            self._failure = SessionClosed(f"cannot reach the arm: {exc!r}")
+            self._failure.__cause__ = exc
             self._closed.set()
             return
         try:
@@ -285,7 +287,7 @@ class ArmClient:
             delay *= 2
             try:
                 stream = await self._factory()
-            except OSError as exc:
+            except (OSError, trio.BrokenResourceError) as exc:
                 log.info("reconnect attempt %d failed: %s", attempt, exc)
                 continue
             self.reconnects += 1
