@@ -1,4 +1,4 @@
-"""The ``linksim`` command: ``relay`` (impaired pty relay, optional modems) and ``bench``."""
+"""The ``linksim`` command: ``demo``, ``arm-server``, ``control``, ``relay`` and ``bench``."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from typing import Any
 
 import trio
 
-from . import _bench_codec, _bench_goodput, _bench_relay
+from . import _armserver, _bench_codec, _bench_goodput, _bench_relay, _demo_cli
 from ._config import PRESETS, ConfigError, DirectionConfig, GilbertElliott, LinkConfig, Outage
 from ._modem import CallOutcome, ModemConfig, ModemPair
 from ._relay import RelayStatistics, run_relay
@@ -218,6 +218,17 @@ def build_parser() -> argparse.ArgumentParser:
     brelay = bench_sub.add_parser("relay", help="pty relay throughput on a clean link")
     _bench_relay.add_arguments(brelay)
     brelay.set_defaults(func=_bench_relay.main)
+    demo = sub.add_parser(
+        "demo", help="a controller commands the simulated arm through the whole stack"
+    )
+    _demo_cli.add_demo_arguments(demo)
+    demo.set_defaults(func=_demo_cli.demo_main)
+    server = sub.add_parser("arm-server", help="the simulated arm behind a command server")
+    _armserver.add_arguments(server)
+    server.set_defaults(func=_armserver.arm_server_main)
+    control = sub.add_parser("control", help="run the rock task against a linksim arm-server")
+    _demo_cli.add_control_arguments(control)
+    control.set_defaults(func=_demo_cli.control_main)
     return ap
 
 

@@ -1,0 +1,343 @@
+"""``linksim demo``: a controller commands the simulated arm through the whole stack.
+
+Three ways to run it, one report:
+
+* **real time, serial** (the default): two pty pairs joined by the impaired
+  relay (``noisy-moon`` unless told otherwise); the arm server runs in its
+  own process (``linksim arm-server``) on one pty, the controller in this one
+  on the other, optionally dialing through emulated Hayes modems first.
+* **real time, TCP**: the arm server in its own process on a loopback port.
+* **virtual** (``--virtual``): everything in one process on trio's virtual
+  clock over the in-memory impaired link: instant and deterministic.
+
+The controller runs seed 000's rock task (:func:`linksim._tasks.rock_task`),
+pipelined, and the report says what was sent, completed and failed, what
+the link did and where the arm ended.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+import time
+from collections.abc import AsyncIterator, Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import trio
+import trio.testing
+
+import serialsocket
+from tcpstream import PACKET_SIZE, ArmClient, Server, ServerConfig, SessionError, connect_stream
+
+from ._arm import SimulatedArm
+from ._channel import open_impaired_link
+from ._config import DirectionConfig, LinkConfig
+from ._control import CommandState, TaskRun, feedback_record
+from ._pair import endpoint_config_for, serial_socket_pair
+from ._progress import Progress
+from ._tasks import rock_task
+from ._world import DEFAULT_WORLD, WorldConfig
+
+__all__ = ["DemoOptions", "DemoReport", "rtt_hint_for", "run_demo"]
+
+IDENTITY = "linksim-demo"
+
+
+@dataclass(frozen=True, slots=True)
+class DemoOptions:
+    """What to run.  ``link`` impairs the serial line (TCP runs on clean loopback)."""
+
+    link: LinkConfig
+    preset: str | None = "noisy-moon"
+    transport: str = "serial"
+    virtual: bool = False
+    dial: str | None = None
+    window: int | None = None
+    max_len: int | None = None
+    world: WorldConfig = DEFAULT_WORLD
+    key: bytes | None = None
+    progress: bool = True
+    live: bool | None = None
+    """Redrawn table (True), plain lines (False), or whatever stderr is (None)."""
+    timeout: float = 600.0
+    """Bound on the whole run, seconds of the run's clock."""
+
+
+@dataclass(slots=True)
+class DemoReport:
+    """The outcome; :meth:`as_dict` is the ``--json`` object."""
+
+    ok: bool
+    transport: str
+    virtual: bool
+    preset: str | None
+    seconds: float
+    run: TaskRun | None
+    link: dict[str, Any]
+    error: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        run = self.run
+        commands = {"sent": 0, "completed": 0, "failed": 0, "total": 0}
+        arm: dict[str, Any] | None = None
+        log: list[dict[str, Any]] = []
+        if run is not None:
+            commands = {
+                "sent": run.sent,
+                "completed": run.count(CommandState.COMPLETED),
+                "failed": run.count(CommandState.FAILED),
+                "total": len(run.records),
+            }
+            final = run.final_feedback
+            if final is not None:
+                arm = feedback_record(final)
+                mass = run.weighed_mass
+                arm["weighed_mass_kg"] = None if mass is None else round(mass, 4)
+            log = [r.as_dict(run.started_at) for r in run.records]
+        return {
+            "ok": self.ok,
+            "transport": self.transport,
+            "virtual": self.virtual,
+            "preset": self.preset,
+            "seconds": round(self.seconds, 3),
+            "commands": commands,
+            "link": self.link,
+            "arm": arm,
+            "command_log": log,
+            "error": self.error,
+        }
+
+
+def rtt_hint_for(link: LinkConfig) -> float:
+    """The round trip a command session should expect on ``link``, in seconds.
+
+    Propagation both ways plus the time to serialise one command packet each
+    way at the line rate, prefix-encoded (about 1.6 characters a byte for
+    binary float64 words in the printable profile) -- the heartbeat and
+    deadman timers are derived from it, so it must not be optimistic.
+    """
+    total = 0.0
+    for d in (link.a_to_b, link.b_to_a):
+        total += d.delay + d.jitter
+        if d.rate is not None:
+            total += (PACKET_SIZE * 1.6 + 40) * d.bits_per_char / d.rate
+    return max(0.05, total)
+
+
+def serial_link_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
+    """The figures an operator reads off a serial socket."""
+    s = sock.statistics().link
+    return {
+        "rtt_s": s.smoothed_rtt,
+        "timeout_s": round(s.timeout, 3),
+        "retransmissions": s.retransmissions,
+        "timeouts": s.timeouts,
+        "naks_sent": s.naks_sent,
+        "naks_received": s.naks_received,
+        "check_failures": s.check_failures,
+        "garbage_bytes": s.garbage_bytes,
+        "packets_sent": s.packets_sent,
+        "packets_received": s.packets_received,
+        "bytes_sent": s.bytes_acknowledged,
+        "bytes_received": s.bytes_delivered,
+        "wire_bytes_sent": s.wire_bytes_sent,
+        "wire_bytes_received": s.wire_bytes_received,
+    }
+
+
+def client_link_figures(client: ArmClient) -> dict[str, Any]:
+    """What the command session itself counted (all a TCP run has)."""
+    stats = client.statistics()
+    conn = stats.get("connection")
+    out: dict[str, Any] = {
+        "reconnects": stats["reconnects"],
+        "telemetry_dropped": stats["telemetry_dropped"],
+    }
+    if conn is not None:
+        for name in ("bytes_sent", "bytes_received", "packets_sent", "packets_received"):
+            value = getattr(conn, name, None)
+            if value is not None:
+                out[name] = value
+        rtt = getattr(conn, "smoothed_rtt", None)
+        if rtt is not None:
+            out["rtt_s"] = rtt
+    return out
+
+
+def _goodput(figures: dict[str, Any], seconds: float) -> None:
+    moved = int(figures.get("bytes_sent", 0)) + int(figures.get("bytes_received", 0))
+    figures["goodput_Bps"] = round(moved / seconds, 1) if seconds > 0 else 0.0
+
+
+# --- the controller side (shared by the demo and `linksim control`) ------------------
+
+
+def new_run(options: DemoOptions) -> TaskRun:
+    """The rock task (seed 000) in the demo's world, ready to run."""
+    return TaskRun(rock_task(options.world).commands)
+
+
+async def drive(
+    client: ArmClient,
+    run: TaskRun,
+    options: DemoOptions,
+    link: Callable[[], Mapping[str, Any]] | None,
+    title: str,
+) -> None:
+    """Run ``run`` through ``client`` with the progress display."""
+    with Progress(
+        run,
+        title=title,
+        link=link,
+        clock=trio.current_time,
+        live=options.live,
+        enabled=options.progress,
+    ) as view:
+        run.on_change = view.changed
+        await run.run(client)
+
+
+def _title(options: DemoOptions, where: str) -> str:
+    preset = options.preset or "custom link"
+    return f"telelink demo: rock task over {options.transport} ({preset}, {where})"
+
+
+# --- virtual: one process, virtual clock -----------------------------------------------
+
+
+@contextlib.asynccontextmanager
+async def _virtual_streams(
+    options: DemoOptions,
+) -> AsyncIterator[tuple[trio.abc.Stream, trio.abc.Stream, Callable[[], dict[str, Any]]]]:
+    if options.transport == "serial":
+        ep = endpoint_config_for(options.link, **_endpoint_overrides(options))
+        async with serial_socket_pair(options.link, endpoint=ep) as (ctl, arm):
+            yield ctl, arm, lambda: serial_link_figures(ctl)
+        return
+    # TCP is reliable: the virtual TCP run keeps the line's delay, not its errors.
+    d = options.link.a_to_b
+    clean = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
+    async with open_impaired_link(clean) as (ctl, arm):
+        yield ctl, arm, dict
+
+
+def _endpoint_overrides(options: DemoOptions) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    if options.window is not None:
+        out["window"] = options.window
+    if options.max_len is not None:
+        out["max_packet_length"] = options.max_len
+    return out
+
+
+async def _run_virtual(options: DemoOptions) -> DemoReport:
+    arm = SimulatedArm(options.world)
+    server_cfg = ServerConfig(key=options.key, rtt_hint=rtt_hint_for(options.link))
+    start = trio.current_time()
+    run = new_run(options)
+    figures: dict[str, Any] = {}
+    error: str | None = None
+    with trio.move_on_after(options.timeout) as scope:
+        async with (
+            _virtual_streams(options) as (ctl, arm_side, probe),
+            Server(arm, server_cfg) as server,
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(server.serve_stream, arm_side)
+            try:
+                async with connect_stream(ctl, identity=IDENTITY, key=options.key) as client:
+                    await drive(client, run, options, probe, _title(options, "virtual time"))
+                    figures = probe() | client_link_figures(client)
+            except (SessionError, trio.BrokenResourceError, OSError) as exc:
+                error = _explain(exc)
+            nursery.cancel_scope.cancel()
+    if scope.cancelled_caught:
+        error = f"the run did not finish within {options.timeout:g} s of link time"
+    seconds = trio.current_time() - start
+    _goodput(figures, seconds)
+    return _report(options, run, figures, seconds, error)
+
+
+def _report(
+    options: DemoOptions,
+    run: TaskRun | None,
+    figures: dict[str, Any],
+    seconds: float,
+    error: str | None,
+) -> DemoReport:
+    if error is None and run is not None and not run.ok:
+        failure = run.first_failure
+        if failure is not None:
+            error = f"the arm refused command #{failure.index} ({failure.label}): {failure.error}"
+    ok = error is None and run is not None and run.ok
+    return DemoReport(
+        ok, options.transport, options.virtual, options.preset, seconds, run, figures, error
+    )
+
+
+def _explain(exc: BaseException) -> str:
+    cause = exc.__cause__
+    text = str(exc) or type(exc).__name__
+    if cause is not None and str(cause) and str(cause) not in text:
+        text += f" ({cause})"
+    return text
+
+
+def run_demo(options: DemoOptions) -> DemoReport:
+    """Run the demo to the end and return its report (never raises for a failed run)."""
+    if options.virtual:
+        return trio.run(_run_virtual, options, clock=trio.testing.MockClock(autojump_threshold=0))
+    from ._demo_real import run_real
+
+    started = time.monotonic()
+    report = trio.run(run_real, options)
+    report.seconds = time.monotonic() - started
+    return report
+
+
+def print_report(report: DemoReport, *, as_json: bool) -> None:
+    """The final report: one JSON object on stdout, or a readable summary on stderr."""
+    data = report.as_dict()
+    if as_json:
+        json.dump(data, sys.stdout)
+        sys.stdout.write("\n")
+        sys.stdout.flush()
+        return
+    out = sys.stderr
+    c = data["commands"]
+    clock = "virtual" if report.virtual else "wall-clock"
+    print(
+        f"\n{'OK' if report.ok else 'FAILED'}: {c['completed']}/{c['total']} commands completed, "
+        f"{c['failed']} failed, {c['sent']} sent, {report.seconds:.1f} s ({clock}) "
+        f"over {report.transport}",
+        file=out,
+    )
+    link = data["link"]
+    if link:
+        keys = (
+            "rtt_s",
+            "goodput_Bps",
+            "bytes_sent",
+            "bytes_received",
+            "retransmissions",
+            "check_failures",
+            "naks_received",
+            "reconnects",
+        )
+        shown = ", ".join(
+            f"{k} {link[k]:.3f}" if isinstance(link[k], float) else f"{k} {link[k]}"
+            for k in keys
+            if k in link and link[k] is not None
+        )
+        print(f"link: {shown}", file=out)
+    arm = data["arm"]
+    if arm is not None:
+        joints = ", ".join(f"{q:.1f}" for q in arm["joints_deg"])
+        p = ", ".join(f"{x:.3f}" for x in arm["p"])
+        print(f"arm: joints ({joints}) deg, hand at ({p}) m", file=out)
+        if arm.get("weighed_mass_kg") is not None:
+            print(f"     weighed {arm['weighed_mass_kg']:.3f} kg", file=out)
+    if report.error:
+        print(f"error: {report.error}", file=out)
