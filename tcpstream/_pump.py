@@ -52,6 +52,7 @@ class Pump:
         self._on_event = on_event
         self._wake = trio.Event()
         self._timer_wake = trio.Event()
+        self._timer_deadline = math.inf
         self._sending = False
         self._done = trio.Event()
         self.bytes_in = 0
@@ -66,7 +67,12 @@ class Pump:
         """Call after anything that made the connection produce output or move its timer."""
         self.drain_events()
         self._wake.set()
-        self._timer_wake.set()
+        # Wake the timer only if its deadline moved earlier (a state change):
+        # sends and receives only push heartbeat and silence deadlines later,
+        # and waking it for those would cost two task switches per packet.
+        deadline = self.conn.get_timer()
+        if deadline is None or deadline < self._timer_deadline:
+            self._timer_wake.set()
 
     def drain_events(self) -> None:
         while (event := self.conn.next_event()) is not None:
@@ -112,7 +118,8 @@ class Pump:
             # that moves the deadline cannot slip in unseen.
             self._timer_wake = trio.Event()
             deadline = conn.get_timer()
-            with trio.move_on_at(math.inf if deadline is None else deadline):
+            self._timer_deadline = math.inf if deadline is None else deadline
+            with trio.move_on_at(self._timer_deadline):
                 await self._timer_wake.wait()
                 continue
             conn.handle_timer(trio.current_time())

@@ -1,0 +1,187 @@
+"""``linksim bench latency``: command -> completed round trip over loopback TCP.
+
+A zero-duration command (STATUS, answered by an instant executor) goes
+through the whole tcpstream path -- client encode, TCP, server decode,
+exactly-once memory, queue, executor task, COMPLETED reply, client decode --
+and is timed until its result is back.  Beside it, in the same run and the
+same event loop, a raw TCP echo of one packet's worth of bytes (216) gives
+the floor: what the loopback and trio cost with no protocol at all.  The two
+are measured in alternating blocks, so load on the machine hits both alike.
+
+Reported: p50, p99 and mean of each, in microseconds, and the p50 ratio.
+Targets (issue 6): p50 within 10x of the raw echo, p99 under 2 ms.
+This is a benchmark, not a test: it measures and prints, it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+import trio
+
+from tcpstream import (
+    PACKET_SIZE,
+    Command,
+    CommandResult,
+    FailureReason,
+    Feedback,
+    connect_tcp,
+    serve_tcp,
+)
+
+__all__ = ["InstantArm", "add_arguments", "main", "run"]
+
+_STATE = Feedback(
+    joints=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    finger_opening=0.0,
+    p=(0.5, 0.0, 0.4),
+    s=(0.0, 1.0, 0.0),
+    a=(0.0, 0.0, 1.0),
+)
+
+
+class InstantArm:
+    """An executor that answers every command at once (no motion, no checkpoint)."""
+
+    control_rate_hz = 125.0
+
+    async def execute(self, command: Command) -> CommandResult:
+        return CommandResult(_STATE)
+
+    def halt(self, reason: FailureReason) -> None:
+        """Nothing moves, so nothing to stop."""
+
+    def state(self) -> Feedback:
+        return _STATE
+
+
+def _port(listeners: Sequence[Any]) -> int:
+    port: int = listeners[0].socket.getsockname()[1]
+    return port
+
+
+async def _echo_handler(stream: trio.SocketStream) -> None:
+    buf = bytearray()
+    while True:
+        data = await stream.receive_some(65536)
+        if not data:
+            return
+        buf += data
+        while len(buf) >= PACKET_SIZE:
+            await stream.send_all(bytes(buf[:PACKET_SIZE]))
+            del buf[:PACKET_SIZE]
+
+
+async def _echo_once(stream: trio.SocketStream, packet: bytes) -> None:
+    await stream.send_all(packet)
+    got = 0
+    while got < PACKET_SIZE:
+        data = await stream.receive_some(PACKET_SIZE - got)
+        if not data:
+            raise RuntimeError("echo server closed")
+        got += len(data)
+
+
+def _summary(samples: list[float]) -> dict[str, float]:
+    ordered = sorted(samples)
+
+    def pct(q: float) -> float:
+        return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1e6
+
+    return {
+        "p50_us": round(pct(0.50), 1),
+        "p99_us": round(pct(0.99), 1),
+        "mean_us": round(statistics.fmean(ordered) * 1e6, 1),
+        "min_us": round(ordered[0] * 1e6, 1),
+    }
+
+
+async def _measure(count: int, warmup: int, block: int) -> dict[str, Any]:
+    command_rtt: list[float] = []
+    echo_rtt: list[float] = []
+    packet = bytes(PACKET_SIZE)
+    clock = time.perf_counter
+    async with trio.open_nursery() as nursery:
+        arm_listeners = await nursery.start(
+            partial(serve_tcp, InstantArm(), 0, host="127.0.0.1", telemetry_every=0)
+        )
+        echo_listeners = await nursery.start(
+            partial(trio.serve_tcp, _echo_handler, 0, host="127.0.0.1")
+        )
+        echo = await trio.open_tcp_stream("127.0.0.1", _port(echo_listeners))
+        async with echo, connect_tcp("127.0.0.1", _port(arm_listeners), identity="bench") as arm:
+            for _ in range(warmup):
+                await arm.status()
+                await _echo_once(echo, packet)
+            done = 0
+            while done < count:
+                n = min(block, count - done)
+                for _ in range(n):
+                    t0 = clock()
+                    await arm.status()
+                    command_rtt.append(clock() - t0)
+                for _ in range(n):
+                    t0 = clock()
+                    await _echo_once(echo, packet)
+                    echo_rtt.append(clock() - t0)
+                done += n
+        nursery.cancel_scope.cancel()
+    cmd, raw = _summary(command_rtt), _summary(echo_rtt)
+    ratio = cmd["p50_us"] / raw["p50_us"] if raw["p50_us"] else float("inf")
+    return {
+        "benchmark": "latency",
+        "count": count,
+        "packet_bytes": PACKET_SIZE,
+        "command": cmd,
+        "raw_echo": raw,
+        "p50_ratio": round(ratio, 2),
+        "target_p50_within_10x": ratio <= 10.0,
+        "target_p99_under_2ms": cmd["p99_us"] < 2000.0,
+    }
+
+
+def run(count: int = 2000, warmup: int = 200, block: int = 100) -> dict[str, Any]:
+    """Measure ``count`` command round trips and ``count`` raw echoes; the report as a dict."""
+    if count < 1 or warmup < 0 or block < 1:
+        raise ValueError("count >= 1, warmup >= 0, block >= 1")
+    result: dict[str, Any] = trio.run(_measure, count, warmup, block)
+    return result
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim bench latency``."""
+    ap.add_argument("--count", type=int, default=2000, help="round trips of each kind")
+    ap.add_argument("--warmup", type=int, default=200, help="untimed round trips first")
+    ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the benchmark and print the report (text, or JSON with ``--json``)."""
+    report = run(args.count, args.warmup)
+    if args.json:
+        json.dump(report, sys.stdout)
+        sys.stdout.write("\n")
+        return 0
+    cmd, raw = report["command"], report["raw_echo"]
+    print(
+        f"command -> completed over loopback TCP ({report['count']} round trips, 216-byte packets)"
+    )
+    print(f"  tcpstream STATUS : p50 {cmd['p50_us']:8.1f} us   p99 {cmd['p99_us']:8.1f} us")
+    print(f"  raw TCP echo     : p50 {raw['p50_us']:8.1f} us   p99 {raw['p99_us']:8.1f} us")
+    ok10 = "yes" if report["target_p50_within_10x"] else "NO"
+    ok2ms = "yes" if report["target_p99_under_2ms"] else "NO"
+    print(f"  p50 ratio {report['p50_ratio']:.2f}x (target <= 10x: {ok10}); p99 < 2 ms: {ok2ms}")
+    return 0
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(prog="python -m linksim._bench_latency", description=__doc__)
+    add_arguments(parser)
+    sys.exit(main(parser.parse_args()))
