@@ -21,6 +21,7 @@ from . import _builders as commands
 from ._api import DEFAULT_PORT, connect_stream, connect_tcp, serve_stream, serve_tcp
 from ._blocking import BlockingClient
 from ._client import ArmClient, CommandHandle
+from ._client_connection import ClientConnection
 from ._commands import (
     ARGUMENT_WORDS,
     AUX_WORDS,
@@ -38,12 +39,7 @@ from ._commands import (
     validate_arguments,
 )
 from ._config import ServerConfig
-from ._connection import (
-    MAX_BAD_IN_A_ROW,
-    ClientConnection,
-    ConnectionStatistics,
-    ServerConnection,
-)
+from ._connection import MAX_BAD_IN_A_ROW, ConnectionStatistics
 from ._errors import (
     AuthenticationFailed,
     LocalProtocolError,
@@ -89,6 +85,7 @@ from ._packet import (
     encode_packet,
 )
 from ._server import Server, ServerStatistics
+from ._server_connection import ServerConnection
 from ._state import TRANSITIONS, IllegalTransition, SessionState, Side, Trigger
 
 __all__ = [

@@ -28,6 +28,7 @@ from types import TracebackType
 import trio
 
 from . import _builders as build
+from ._client_connection import ClientConnection
 from ._commands import (
     Command,
     CommandCode,
@@ -36,7 +37,6 @@ from ._commands import (
     Feedback,
     validate_arguments,
 )
-from ._connection import ClientConnection
 from ._errors import AuthenticationFailed, LocalProtocolError, Refused, SessionClosed
 from ._events import (
     Accepted,

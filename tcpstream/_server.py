@@ -33,7 +33,6 @@ from ._commands import (
     FailureReason,
 )
 from ._config import ServerConfig
-from ._connection import ServerConnection
 from ._events import (
     CloseReason,
     CommandReceived,
@@ -49,6 +48,7 @@ from ._events import (
 )
 from ._memory import Lookup, RequestMemory, StoredFailure, StoredReply, StoredSuccess
 from ._pump import Pump
+from ._server_connection import ServerConnection
 
 __all__ = ["Server", "ServerStatistics"]
 
