@@ -8,6 +8,7 @@ import pathlib
 import pytest
 
 import serialsocket
+import tcpstream
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -150,3 +151,109 @@ def test_protocol_error_is_abstract() -> None:
         serialsocket.ProtocolError("x")
     err = serialsocket.RemoteProtocolError("peer sent nonsense")
     assert err.error_hint == "peer sent nonsense"
+
+
+# tcpstream's sans-I/O core: the codec, the state table, the connections, the
+# exactly-once memory.  Only _pump, _server, _client, _blocking and _api touch trio.
+TCPSTREAM_SANS_IO = [
+    "_auth",
+    "_builders",
+    "_client_connection",
+    "_commands",
+    "_config",
+    "_connection",
+    "_errors",
+    "_events",
+    "_memory",
+    "_packet",
+    "_server_connection",
+    "_state",
+]
+
+
+@pytest.mark.parametrize("module", TCPSTREAM_SANS_IO)
+def test_tcpstream_core_modules_are_sans_io(module: str) -> None:
+    bad = imports_of(ROOT / "tcpstream" / f"{module}.py") & FORBIDDEN_IN_CORE
+    assert not bad, f"tcpstream/{module}.py imports {bad}"
+
+
+def test_tcpstream_public_names_are_pinned() -> None:
+    assert sorted(tcpstream.__all__) == sorted(
+        [
+            "ARGUMENT_WORDS",
+            "AUX_WORDS",
+            "Accepted",
+            "ArmClient",
+            "AuthenticationFailed",
+            "BadField",
+            "BadMagic",
+            "BadVersion",
+            "BlockingClient",
+            "ClientConnection",
+            "CloseReason",
+            "Command",
+            "CommandCode",
+            "CommandFailed",
+            "CommandFlags",
+            "CommandHandle",
+            "CommandReceived",
+            "CommandResult",
+            "Completed",
+            "ConnectionStatistics",
+            "ControlRequested",
+            "ControllerIdentity",
+            "DEFAULT_PORT",
+            "EmergencyStopRequested",
+            "Event",
+            "Executor",
+            "Failed",
+            "FailureReason",
+            "Feedback",
+            "FeedbackSlot",
+            "Granted",
+            "IllegalTransition",
+            "JOINTS",
+            "LocalProtocolError",
+            "MAGIC",
+            "MAX_BAD_IN_A_ROW",
+            "MAX_PATH_POINTS",
+            "NonFiniteWord",
+            "PACKET_SIZE",
+            "PROTOCOL_VERSION",
+            "Packet",
+            "PacketError",
+            "PacketKind",
+            "PacketRejected",
+            "RefusalReceived",
+            "RefuseReason",
+            "Refused",
+            "RemoteProtocolError",
+            "Role",
+            "Server",
+            "ServerConfig",
+            "ServerConnection",
+            "ServerStatistics",
+            "SessionClosed",
+            "SessionEnded",
+            "SessionError",
+            "SessionParameters",
+            "SessionState",
+            "Side",
+            "TRANSITIONS",
+            "TelemetryReceived",
+            "Trigger",
+            "UnknownCommand",
+            "UnknownKind",
+            "WrongSize",
+            "commands",
+            "connect_stream",
+            "connect_tcp",
+            "decode_packet",
+            "encode_packet",
+            "serve_stream",
+            "serve_tcp",
+            "validate_arguments",
+        ]
+    )
+    for name in tcpstream.__all__:
+        assert getattr(tcpstream, name) is not None
