@@ -9,9 +9,10 @@ line with the stack's defaults: 2400 bit/s, 1.3 s one way, byte error rate
 
 Each point transfers enough data to reach steady state (:func:`steady_size`):
 at least 50 round trips (the pipe fills within one, so the start-up costs at
-most ~2 %), at least 25 expected packet errors (so the recovery cost is
-averaged over many losses, not one or two lucky ones), at least 200 packets;
-and at most about 600 kB on the line, which bounds CPU time.
+most ~2 %), at least 40 expected packet errors (so the recovery cost is
+averaged over many losses, not one or two lucky ones), at least 400 packets;
+and at most about 600 kB on the line (at least 100 packets), which bounds the
+CPU time of a point to a few seconds.
 """
 
 from __future__ import annotations
@@ -186,9 +187,9 @@ def steady_size(point: Point) -> int:
     carried, wire = packet_sizes(sample, PROFILES[point.profile], point.max_len)
     p_hit = packet_error_probability(wire, point.ber, BENCH_BURST if point.burst else None)
     tx = wire * BITS_PER_CHAR / point.baud
-    packets = max(200.0, 50 * _round_trip(point.baud, point.delay, point.max_len) / tx)
+    packets = max(400.0, 50 * _round_trip(point.baud, point.delay, point.max_len) / tx)
     if p_hit > 0:
-        packets = max(packets, 25 / p_hit)
+        packets = max(packets, 40 / p_hit)
     packets = min(packets, max(100.0, _WIRE_BUDGET / wire / max(1 - p_hit, 0.05)))
     return int(packets * carried)
 

@@ -80,7 +80,12 @@ def _series_label(r: Row) -> str:
 def _select(
     rows: Sequence[Row], fixed: Callable[[Row], Any], prefer: Any, x: Callable[[Row], Any]
 ) -> dict[int, list[Row]]:
-    """Rows per line rate at one value of ``fixed`` (``prefer`` if present), >= 2 x values."""
+    """Rows per line rate at one value of ``fixed`` (``prefer`` if present).
+
+    A line needs two x values to be a line; a panel is drawn for the rates
+    with the most lines (the 2-D sweeps), not for rates that a one-factor
+    sweep touched with one or two windows only.
+    """
     rows = _eligible(rows)
     values = Counter(fixed(r) for r in rows)
     if not values:
@@ -90,7 +95,16 @@ def _select(
     for r in rows:
         if fixed(r) == keep:
             by_rate[r["baud"]].append(r)
-    return {rate: rs for rate, rs in sorted(by_rate.items()) if len({x(r) for r in rs}) >= 2}
+    panels: dict[int, list[Row]] = {}
+    for rate, rs in sorted(by_rate.items()):
+        xs: dict[str, set[Any]] = defaultdict(set)
+        for r in rs:
+            xs[_series_label(r)].add(x(r))
+        lines = {label for label, seen in xs.items() if len(seen) >= 2}
+        if lines:
+            panels[rate] = [r for r in rs if _series_label(r) in lines]
+    most = max((len({_series_label(r) for r in rs}) for rs in panels.values()), default=0)
+    return {rate: rs for rate, rs in panels.items() if len({_series_label(r) for r in rs}) == most}
 
 
 def _draw(
@@ -211,19 +225,19 @@ def _save(
     plt.close(fig)
 
 
-_NOTE = "random binary, 128-byte packets, printable profile; virtual time (exact)"
+_NOTE = "random binary, printable profile, 128-byte packets unless auto; virtual time, exact"
 
 
 def plot_delay(rows: Sequence[Row], path: Path) -> None:
     """Efficiency against one-way delay, one panel per line rate, one line per window."""
     panels = [(_draw_delay, rate, rs) for rate, rs in _delay_panels(rows)]
-    _save(panels, path, f"Goodput efficiency against delay ({_NOTE})", min(2, len(panels)))
+    _save(panels, path, f"Goodput efficiency against delay\n{_NOTE}", min(2, len(panels)))
 
 
 def plot_ber(rows: Sequence[Row], path: Path) -> None:
     """Efficiency against byte error rate, one panel per line rate, one line per window."""
     panels = [(_draw_ber, rate, rs) for rate, rs in _ber_panels(rows)]
-    _save(panels, path, f"Goodput efficiency against error rate ({_NOTE})", min(2, len(panels)))
+    _save(panels, path, f"Goodput efficiency against error rate\n{_NOTE}", min(2, len(panels)))
 
 
 def plot_both(rows: Sequence[Row], path: Path) -> None:
@@ -234,7 +248,7 @@ def plot_both(rows: Sequence[Row], path: Path) -> None:
     # Start the error-rate view on a fresh row of panels.
     pad = (columns - len(delay) % columns) % columns
     panels = delay + [(_blank, 0, [])] * pad + ber
-    _save(panels, path, f"Goodput efficiency ({_NOTE})", columns)
+    _save(panels, path, f"Goodput efficiency\n{_NOTE}", columns)
 
 
 def _blank(ax: Axes, rate: int, rows: Sequence[Row]) -> None:
