@@ -1,0 +1,33 @@
+"""The pty benchmark runs on a tiny input and prints valid JSON (speed is not asserted)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import pytest
+
+from linksim import _bench_pty
+
+
+def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
+    ap = argparse.ArgumentParser()
+    _bench_pty.add_arguments(ap)
+    args = ap.parse_args(["--json", "--size", "5000", "--runs", "3"])
+    assert _bench_pty.main(args) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["benchmark"] == "pty"
+    assert [r["max_packet_length"] for r in report["results"]] == [128, 4096]
+    for r in report["results"]:
+        assert r["bytes"] == 5000
+        assert r["runs"] == 3
+        assert len(r["seconds"]) == 3
+        assert r["median_seconds"] == sorted(r["seconds"])[1]
+        assert r["MBps"] > 0
+
+
+def test_bench_pty_rejects_bad_sizes(capsys: pytest.CaptureFixture[str]) -> None:
+    ap = argparse.ArgumentParser()
+    _bench_pty.add_arguments(ap)
+    assert _bench_pty.main(ap.parse_args(["--size", "0"])) == 2
+    assert "--size and --runs must be >= 1" in capsys.readouterr().err
