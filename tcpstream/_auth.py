@@ -1,6 +1,6 @@
 """Pre-shared-key authentication: challenge-response, session keys, packet tags.
 
-PROTOCOL.md section 6.  The design answers the MAVLink signing pitfalls of
+PROTOCOL.md section 8.  The design answers the MAVLink signing pitfalls of
 ``shared/reference/peers.md``:
 
 * No clock in the replay defence: each direction of each session carries a

@@ -208,10 +208,19 @@ class ArmClient:
         if exc is None:
             await self.aclose()
         else:
-            self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc_type}")
+            # Tell the arm we are gone (it halts outstanding work at once rather
+            # than waiting out the deadman); bounded, and even when cancelled.
+            self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc!r}")
+            if self._pump is not None:
+                with trio.move_on_after(1.0) as scope:
+                    scope.shield = True
+                    await self._pump.wait_done()
         assert self._nursery is not None
         self._nursery.cancel_scope.cancel()
-        return await self._nursery_cm.__aexit__(exc_type, exc, tb)
+        # The background tasks end by this cancel; the caller's own exception (if
+        # any) then propagates as itself, not wrapped in an exception group.
+        await self._nursery_cm.__aexit__(None, None, None)
+        return None
 
     async def aclose(self, *, wait: bool = True) -> None:
         """Finish: wait for outstanding commands (``wait``), say BYE, close the stream."""

@@ -1,4 +1,4 @@
-"""The controller's end of a session, sans-I/O: HELLO, AUTH, commands, replies (PROTOCOL.md 5-6)."""
+"""The controller's end of a session, sans-I/O: HELLO, AUTH, commands, replies (PROTOCOL.md 7-8)."""
 
 from __future__ import annotations
 

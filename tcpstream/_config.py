@@ -1,4 +1,4 @@
-"""Server configuration and the timing rules derived from the link (PROTOCOL.md section 8)."""
+"""Server configuration and the timing rules derived from the link (PROTOCOL.md section 10)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The arm's server: one executor, one ordered queue, many connections (PROTOCOL.md 7-9).
+"""The arm's server: one executor, one ordered queue, many connections (PROTOCOL.md 9-11).
 
 A :class:`Server` owns what outlives a connection: the executor task and its
 bounded queue, the exactly-once memory, the controller's lease (who holds the
@@ -176,7 +176,9 @@ class Server:
         assert self._nursery is not None
         self._nursery.cancel_scope.cancel()
         try:
-            return await self._nursery_cm.__aexit__(exc_type, exc, tb)
+            # The caller's exception propagates as itself (not in a group).
+            await self._nursery_cm.__aexit__(None, None, None)
+            return None
         finally:
             self._nursery = None
             # Whatever happens to the server, the arm does not keep moving.
@@ -267,7 +269,7 @@ class Server:
             log.info("rejected packet: %s", event.message)
         elif isinstance(event, SessionEnded):
             log.info("session ended: %s %s", event.reason.name, event.message)
-            self._detach(link, event.reason)
+            self._detach(link, event)
 
     def _decide(self, link: _Link, identity: ControllerIdentity, role: Role) -> None:
         now = trio.current_time()
@@ -297,23 +299,21 @@ class Server:
         link.conn.refuse(reason, message, trio.current_time())
         link.granted.set()  # decided: the guard may stand down
 
-    def _detach(self, link: _Link, reason: CloseReason | None = None) -> None:
+    def _detach(self, link: _Link, ended: SessionEnded | None = None) -> None:
         if self._holder_link is not link:
             return
         self._holder_link = None
         self._holder_heard = link.conn.last_heard
-        busy = self._running is not None or bool(self._queue)
-        if reason is CloseReason.SILENCE:
+        if ended is not None and ended.reason is CloseReason.SILENCE:
             self._trip_deadman()
-        elif reason is CloseReason.NORMAL and busy:
-            # The controller said goodbye with work outstanding: nobody is left to
-            # watch it, so stop rather than carry on.
-            self._halt_all(FailureReason.STOPPED, "the controller closed the session")
+        elif ended is not None and ended.by_peer and ended.reason is not CloseReason.PEER_EOF:
+            # The controller said goodbye (any BYE).  If work is outstanding,
+            # nobody is left to watch it: stop rather than carry on.
+            if self._running is not None or self._queue:
+                self._halt_all(FailureReason.STOPPED, "the controller closed the session")
             self._release()
-        elif reason in (CloseReason.NORMAL, CloseReason.TERMINATED):
-            self._release()
-        # Otherwise (EOF, broken stream, garbage) the lease runs on: the same
-        # controller may resume within the dead time, else the deadman trips.
+        # Otherwise (EOF, broken stream, garbage, cancelled) the lease runs on: the
+        # same controller may resume within the dead time, else the deadman trips.
         self._lease_wake.set()
 
     def _release(self) -> None:

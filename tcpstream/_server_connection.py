@@ -1,4 +1,4 @@
-"""The arm's end of a session, sans-I/O: handshake, grant/refuse, replies (PROTOCOL.md 5-6)."""
+"""The arm's end of a session, sans-I/O: handshake, grant/refuse, replies (PROTOCOL.md 7-8)."""
 
 from __future__ import annotations
 

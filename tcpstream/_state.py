@@ -1,4 +1,4 @@
-"""The session state machine: every legal transition, in one table (PROTOCOL.md section 5).
+"""The session state machine: every legal transition, in one table (PROTOCOL.md section 7).
 
 Read :data:`TRANSITIONS` to draw the machine.  A transition not in the table
 raises :class:`IllegalTransition`: for a local call that is the caller's bug

@@ -14,6 +14,8 @@ from tcpstream import (
     ControllerIdentity,
     FailureReason,
     PacketKind,
+    Refused,
+    RefuseReason,
     ServerConfig,
     SessionClosed,
     commands,
@@ -21,7 +23,7 @@ from tcpstream import (
 )
 
 from .fakearm import FakeArm
-from .harness import run, wired
+from .harness import Wiring, run, wired
 
 PATIENT = ServerConfig(dead_time=30.0)
 """A deadman long enough that reconnect tests are about memory, not halting."""
@@ -199,3 +201,45 @@ def test_failed_command_is_reported_once_even_when_resent() -> None:
 
     run(main)
     assert arm.count(CommandCode.CENTER_FINGERS) == 1
+
+
+def test_controller_error_says_goodbye_and_the_arm_stops() -> None:
+    arm = FakeArm(move_time=100.0)
+
+    async def main() -> None:
+        async def controller_with_a_bug(w: Wiring) -> None:
+            async with w.client() as c:
+                handle = await c.submit(commands.move_joints([1.0] * 6))
+                await handle.accepted()
+                raise RuntimeError("controller bug")
+
+        async with wired(arm) as w:
+            with pytest.raises(RuntimeError, match="controller bug"):
+                await controller_with_a_bug(w)
+            await trio.sleep(0.01)  # far less than the dead time: the BYE did it
+            assert w.server.statistics().controller is None
+            assert w.server.statistics().deadman_trips == 0
+
+    run(main)
+    assert arm.halts[0] is FailureReason.STOPPED
+
+
+def test_a_different_controller_waits_out_the_lease() -> None:
+    """After an unclean disconnect, control is held for the dead time, then freed."""
+    arm = FakeArm()
+    config = ServerConfig(dead_time=5.0)
+
+    async def main() -> None:
+        async with wired(arm, config) as w, w.client(identity="first", reconnect_attempts=0) as c:
+            await c.status()
+            await w.break_link()
+            await trio.sleep(1.0)
+            with pytest.raises(Refused) as info:
+                async with w.client(identity="second"):
+                    pass
+            assert info.value.reason is RefuseReason.BUSY
+            await trio.sleep(5.0)
+            async with w.client(identity="second") as second:
+                await second.status()
+
+    run(main)
