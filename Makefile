@@ -17,15 +17,13 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	printf 'Move arm to the rock, then weigh it.\000\001\377' \
-	  | $(PY) -m serialsocket encode --type D --seq 1 \
-	  | tee /dev/stderr | $(PY) -m serialsocket decode
+	$(PY) -m linksim demo $(ARGS)
 
 test: lint typecheck pytest
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check $(PKGS) tests fuzz
-	$(VENV)/bin/ruff format --check $(PKGS) tests fuzz
+	$(VENV)/bin/ruff check $(PKGS) tests fuzz examples
+	$(VENV)/bin/ruff format --check $(PKGS) tests fuzz examples
 
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy --strict $(PKGS)

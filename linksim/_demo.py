@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import random
 import sys
 import time
 from collections.abc import AsyncIterator, Callable, Mapping
@@ -234,7 +235,13 @@ def _endpoint_overrides(options: DemoOptions) -> dict[str, Any]:
 
 async def _run_virtual(options: DemoOptions) -> DemoReport:
     arm = SimulatedArm(options.world)
-    server_cfg = ServerConfig(key=options.key, rtt_hint=rtt_hint_for(options.link))
+    # Virtual runs are deterministic: session nonces and the controller's
+    # incarnation come from the link seed, not the OS (they change packet
+    # contents, hence prefix-encoded sizes, hence timing).
+    rng = random.Random(options.link.seed)
+    server_cfg = ServerConfig(
+        key=options.key, rtt_hint=rtt_hint_for(options.link), nonce_source=rng.randbytes
+    )
     start = trio.current_time()
     run = new_run(options)
     figures: dict[str, Any] = {}
@@ -247,7 +254,13 @@ async def _run_virtual(options: DemoOptions) -> DemoReport:
         ):
             nursery.start_soon(server.serve_stream, arm_side)
             try:
-                async with connect_stream(ctl, identity=IDENTITY, key=options.key) as client:
+                async with connect_stream(
+                    ctl,
+                    identity=IDENTITY,
+                    key=options.key,
+                    incarnation=rng.getrandbits(64),
+                    nonce_source=rng.randbytes,
+                ) as client:
                     await drive(client, run, options, probe, _title(options, "virtual time"))
                     figures = probe() | client_link_figures(client)
             except (SessionError, trio.BrokenResourceError, OSError) as exc:
