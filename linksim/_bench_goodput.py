@@ -17,7 +17,8 @@ Modes:
   point supplying the rest (``--window`` and the others may repeat).
 
 Output: a text table, or ``--json`` (the rows as one JSON array on stdout),
-and/or ``--output FILE.json``; ``--plot FILE.png`` draws efficiency against
+and/or ``--output FILE.json``, or ``--summary`` (the markdown tables of
+bench/results/README.md); ``--plot FILE.png`` draws efficiency against
 delay and against error rate, one line per window (needs the ``plot`` extra).
 The exit status is 1 if any row's delivered data was not exact.
 """
@@ -222,6 +223,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--json", action="store_true", help="print the rows as a JSON array only")
     ap.add_argument("--output", type=Path, metavar="FILE", help="also write the rows here")
     ap.add_argument(
+        "--summary", action="store_true", help="print the summary tables (markdown) instead"
+    )
+    ap.add_argument(
         "--plot", type=Path, metavar="FILE.png", help="efficiency vs delay and vs error rate"
     )
     ap.add_argument("--plot-delay", type=Path, metavar="FILE.png", help="the delay view alone")
@@ -310,6 +314,10 @@ def main(args: argparse.Namespace) -> int:
     if args.json:
         json.dump(rows, sys.stdout)
         sys.stdout.write("\n")
+    elif args.summary:
+        from ._bench_summary import summarize
+
+        sys.stdout.write(summarize(rows))
     else:
         _print_table(rows)
     if args.plot or args.plot_delay or args.plot_ber:
