@@ -73,6 +73,7 @@ _FINAL_REASONS = frozenset(
         CloseReason.AUTHENTICATION,
         CloseReason.SHUTDOWN,
         CloseReason.TAKEN_OVER,
+        CloseReason.IDLE,
     }
 )
 """Session ends after which reconnecting would be wrong."""
@@ -434,12 +435,20 @@ class ArmClient:
             self._subscribers.discard(send)
 
     def statistics(self) -> dict[str, object]:
+        """Counters for an operator: ``pending`` commands, ``reconnects``,
+        ``telemetry_dropped``, ``rejected_by_arm`` (FAILED replies not matching a
+        command: packets the arm could not use), ``bytes_sent`` / ``bytes_received``
+        on the current stream, and ``connection``: the current
+        :class:`ConnectionStatistics` (packets, bad packets, replays, heartbeats).
+        """
         pump = self._pump
         return {
             "pending": len(self._pending),
             "reconnects": self.reconnects,
             "telemetry_dropped": self.telemetry_dropped,
             "rejected_by_arm": self.rejected_by_arm,
+            "bytes_sent": pump.bytes_out if pump is not None else 0,
+            "bytes_received": pump.bytes_in if pump is not None else 0,
             "connection": pump.conn.statistics() if pump is not None else None,
         }
 

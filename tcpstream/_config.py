@@ -43,6 +43,10 @@ class ServerConfig:
     heartbeat_interval: float | None = None
     dead_time: float | None = None
     handshake_timeout: float | None = None
+    idle_timeout: float | None = 3600.0
+    """Seconds a controller may hold the arm without commanding it (heartbeats do
+    not count; a command still running does) before control is released for
+    others; None: no limit.  Observers are bounded by ``max_connections`` instead."""
     telemetry_every: int = 10
     """Telemetry every N-th control sample (seed 004 forwards every tenth); 0: none."""
     queue_size: int = 32
@@ -62,6 +66,8 @@ class ServerConfig:
             raise ValueError(f"the pre-shared key needs at least {MIN_KEY_SIZE} bytes")
         if not self.rtt_hint >= 0:
             raise ValueError("rtt_hint must be >= 0 seconds")
+        if self.idle_timeout is not None and not self.idle_timeout > 0:
+            raise ValueError("idle_timeout must be > 0 seconds (or None)")
         if self.telemetry_every < 0 or self.queue_size < 1 or self.max_connections < 1:
             raise ValueError("telemetry_every >= 0, queue_size >= 1, max_connections >= 1")
         hb, dead = self.timing()

@@ -18,6 +18,7 @@ about commands once they are received (queue, executor, exactly-once memory).
 
 from __future__ import annotations
 
+import math
 import struct
 from collections import deque
 from collections.abc import Callable
@@ -208,7 +209,11 @@ class _Connection:
         if self._state is not SessionState.OPEN or self._params is None:
             return self._handshake_deadline
         p = self._params
-        return min(self._last_out + p.heartbeat_interval, self._last_in + p.dead_time)
+        return min(
+            self._last_out + p.heartbeat_interval,
+            self._last_in + p.dead_time,
+            self._idle_deadline(),
+        )
 
     def handle_timer(self, now: float) -> None:
         """Send a due heartbeat; end the session on silence or handshake timeout."""
@@ -226,6 +231,10 @@ class _Connection:
             self._events.append(
                 SessionEnded(CloseReason.SILENCE, "the peer fell silent", by_peer=False)
             )
+            return
+        if now >= self._idle_deadline():
+            self.close(CloseReason.IDLE, now, "no commands for the idle timeout; control released")
+            self._events.append(SessionEnded(CloseReason.IDLE, "idle timeout", by_peer=False))
             return
         if now >= self._last_out + p.heartbeat_interval:
             self._move(Trigger.HEARTBEAT)
@@ -346,6 +355,10 @@ class _Connection:
 
     def _dispatch(self, packet: Packet, now: float) -> None:
         raise NotImplementedError
+
+    def _idle_deadline(self) -> float:
+        """When an idle session ends (the arm's controller only; never by default)."""
+        return math.inf
 
     def _handshake_timed_out(self, now: float) -> None:
         raise NotImplementedError

@@ -82,6 +82,8 @@ class CloseReason(enum.IntEnum):
     """The local program closed the session (server stopping, client cancelled)."""
     TAKEN_OVER = 9
     """The same controller connected again; this older connection is retired."""
+    IDLE = 10
+    """The controller sent no command for the arm's idle timeout; control is released."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -99,6 +99,7 @@ class _Link:
             server.parameters,
             key=cfg.key,
             handshake_timeout=cfg.handshake_time(),
+            idle_timeout=cfg.idle_timeout,
             now=trio.current_time(),
             nonce_source=cfg.nonce_source,
         )
@@ -306,6 +307,8 @@ class Server:
         self._holder_heard = link.conn.last_heard
         if ended is not None and ended.reason is CloseReason.SILENCE:
             self._trip_deadman()
+        elif ended is not None and ended.reason is CloseReason.IDLE:
+            self._release()  # idle: nothing outstanding by definition
         elif ended is not None and ended.by_peer and ended.reason is not CloseReason.PEER_EOF:
             # The controller said goodbye (any BYE).  If work is outstanding,
             # nobody is left to watch it: stop rather than carry on.

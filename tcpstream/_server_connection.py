@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import secrets
 from collections.abc import Callable
 
@@ -59,6 +60,7 @@ class ServerConnection(_Connection):
         *,
         key: bytes | None = None,
         handshake_timeout: float = 10.0,
+        idle_timeout: float | None = None,
         now: float = 0.0,
         nonce_source: Callable[[int], bytes] = secrets.token_bytes,
     ) -> None:
@@ -66,6 +68,11 @@ class ServerConnection(_Connection):
             key=key, handshake_timeout=handshake_timeout, now=now, nonce_source=nonce_source
         )
         self._granted_params = parameters
+        self._idle_timeout = idle_timeout
+        self._last_activity = now
+        # Request ids ACCEPTED and not yet answered: while any is outstanding the
+        # controller is waiting, not idle.  Bounded by the arm's queue (+1 running).
+        self._outstanding: set[int] = set()
         self.identity: ControllerIdentity | None = None
         self._identity_raw = b""
         self._incarnation = 0
@@ -77,6 +84,7 @@ class ServerConnection(_Connection):
         """Grant ``role`` (GRANT carries the timing and, keyed, the arm's proof)."""
         self._move(Trigger.GRANT)
         self.role = role
+        self._last_activity = now
         self._params = self._granted_params
         p = self._params
         body = bytes(BODY_SIZE)
@@ -166,6 +174,16 @@ class ServerConnection(_Connection):
     def _reply(self, packet: Packet, now: float) -> None:
         self._move(Trigger.REPLY)
         self._send(packet, now)
+        if packet.kind is PacketKind.ACCEPTED:
+            self._outstanding.add(packet.request_id)
+        elif packet.kind in (PacketKind.COMPLETED, PacketKind.FAILED):
+            self._outstanding.discard(packet.request_id)
+            self._last_activity = now
+
+    def _idle_deadline(self) -> float:
+        if self._idle_timeout is None or self.role is not Role.CONTROLLER or self._outstanding:
+            return math.inf
+        return self._last_activity + self._idle_timeout
 
     def _answer_rejected(
         self, reason: FailureReason, message: str, request_id: int, now: float
@@ -264,6 +282,7 @@ class ServerConnection(_Connection):
 
     def _on_command(self, packet: Packet, now: float) -> None:
         self._move(Trigger.COMMAND_IN)
+        self._last_activity = now
         rid = packet.request_id
         if self.role is not Role.CONTROLLER:
             self.failed(

@@ -12,10 +12,12 @@ from tcpstream import (
     ClientConnection,
     CloseReason,
     CommandReceived,
+    CommandResult,
     ControllerIdentity,
     ControlRequested,
     Event,
     FailureReason,
+    Feedback,
     Granted,
     Packet,
     PacketKind,
@@ -342,3 +344,44 @@ def test_observer_commands_are_refused_by_the_arm() -> None:
     reply = decode_packet(pair.to_client[-1])
     assert (reply.kind, reply.status) == (PacketKind.FAILED, FailureReason.NOT_AUTHORIZED)
     assert received_commands(pair.server_events) == []
+
+
+def test_idle_controller_is_released_but_not_while_a_command_runs() -> None:
+    server = ServerConnection(PARAMS, idle_timeout=10.0)
+    client = ClientConnection(WHO)
+    client.connect(0.0)
+    server.receive_data(client.data_to_send(), 0.0)
+    drain(server)
+    server.grant(Role.CONTROLLER, 0, 0.0)
+    client.receive_data(server.data_to_send(), 0.0)
+    move = commands.move_joints([1.0] * 6)
+
+    def run_until(end: float, start: float) -> None:
+        """Both sides heartbeat each other every 0.5 s (the link stays alive)."""
+        t = start
+        while t < end and server.state is SessionState.OPEN:
+            t += 0.25
+            client.handle_timer(t)
+            if up := client.data_to_send():  # b"" would mean end of stream
+                server.receive_data(up, t)
+            server.handle_timer(t)
+            if down := server.data_to_send():
+                client.receive_data(down, t)
+
+    client.send_command(1, move, 2.0)
+    server.receive_data(client.data_to_send(), 2.0)
+    drain(server)
+    server.accepted(1, move.code, 0, 2.0)
+    run_until(30.0, 2.0)  # a command running is activity, however long it runs
+    assert server.state is SessionState.OPEN
+    server.completed(1, move.code, _result(), 30.0)
+    run_until(39.75, 30.0)  # heartbeats alone do not count...
+    assert server.state is SessionState.OPEN
+    run_until(40.0, 39.75)  # ...10 s after the last reply, control is released
+    assert server.state is SessionState.CLOSED
+    ended = [e for e in drain(server) if isinstance(e, SessionEnded)]
+    assert ended[-1].reason is CloseReason.IDLE
+
+
+def _result() -> CommandResult:
+    return CommandResult(Feedback((0.0,) * 6, 0.0, (0.0,) * 3, (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
