@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import pytest
 import trio
+import trio.testing
 
 from tcpstream import (
     PACKET_SIZE,
+    ArmClient,
     ClientConnection,
     CloseReason,
     CommandCode,
@@ -16,6 +18,7 @@ from tcpstream import (
     PacketKind,
     Refused,
     RefuseReason,
+    Server,
     ServerConfig,
     SessionClosed,
     commands,
@@ -243,3 +246,37 @@ def test_a_different_controller_waits_out_the_lease() -> None:
                 await second.status()
 
     run(main)
+
+
+def test_an_arm_that_lost_its_memory_is_not_sent_the_command_again() -> None:
+    """The arm restarted while a command was queued: outcome unknown, not re-run."""
+    first_arm, second_arm = FakeArm(move_time=10.0), FakeArm(move_time=10.0)
+
+    async def main() -> None:
+        async with (
+            Server(first_arm, PATIENT) as first,
+            Server(second_arm, PATIENT) as second,
+            trio.open_nursery() as nursery,
+        ):
+            current = [first]
+            streams: list[trio.abc.Stream] = []
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(current[0].serve_stream, server_end)
+                streams.append(client_end)
+                return client_end
+
+            async with ArmClient(factory, reconnect_delay=0.5) as c:
+                handle = await c.submit(commands.move_joints([1.0] * 6))
+                await handle.accepted()
+                current[0] = second  # "the arm restarted": a server with no memory
+                await trio.aclose_forcefully(streams[-1])
+                with pytest.raises(SessionClosed, match="outcome unknown"):
+                    await handle.completed()
+                assert (await c.status()).feedback is not None  # the session goes on
+            nursery.cancel_scope.cancel()
+
+    run(main)
+    assert second_arm.count(CommandCode.MOVE_JOINTS) == 0
+    assert second_arm.count(CommandCode.STATUS) == 1
