@@ -94,7 +94,11 @@ class Pump:
         finally:
             with trio.move_on_after(CLOSE_TIMEOUT) as scope:
                 scope.shield = True
-                await self.stream.aclose()
+                try:
+                    await self.stream.aclose()
+                except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
+                    # A TLS close_notify into a dead socket, say: closed anyway.
+                    log.debug("closing the stream failed: %r", exc)
             self._done.set()
 
     async def _reader(self) -> None:

@@ -183,7 +183,7 @@ class Server:
         finally:
             self._nursery = None
             # Whatever happens to the server, the arm does not keep moving.
-            self.executor.halt(FailureReason.STOPPED)
+            self._halt(FailureReason.STOPPED)
 
     def statistics(self) -> ServerStatistics:
         holder_link = self._holder_link
@@ -239,11 +239,12 @@ class Server:
             trio.current_time(),
         )
         with trio.move_on_after(self.config.handshake_time()):
-            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError, OSError):
                 await stream.send_all(conn.data_to_send())
         with trio.move_on_after(1.0) as s:
             s.shield = True
-            await stream.aclose()
+            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError, OSError):
+                await stream.aclose()
 
     async def serve_listeners(
         self,
@@ -413,17 +414,18 @@ class Server:
             self._reply(identity, request_id, stored)
             return
         # Halt first, bookkeeping after: the arm stops at once.
-        self.executor.halt(FailureReason.STOPPED)
+        self._halt(FailureReason.STOPPED)
         self._stats["emergency_stops"] += 1
         self._halt_all(FailureReason.STOPPED, "emergency stop")
         if status is Lookup.NEW:
             self.memory.start(identity, request_id)
-            result = CommandResult(self.executor.state())
-            self._finish(identity, request_id, StoredSuccess(CommandCode.EMERGENCY_STOP, result))
+            self._finish(
+                identity, request_id, self._state_reply(Command(CommandCode.EMERGENCY_STOP))
+            )
 
     def _halt_all(self, reason: FailureReason, why: str) -> None:
         """Cancel the running command and fail every queued one with ``reason``."""
-        self.executor.halt(reason)
+        self._halt(reason)
         if self._running_scope is not None:
             self._cancel_reason = reason
             self._running_scope.cancel()
@@ -468,7 +470,7 @@ class Server:
     async def _execute(self, job: _Job) -> StoredReply:
         command = job.command
         if command.code is CommandCode.TERMINATE:
-            return StoredSuccess(command.code, CommandResult(self.executor.state()))
+            return self._state_reply(command)
         with trio.CancelScope() as scope:
             self._running_scope = scope
             try:
@@ -478,14 +480,31 @@ class Server:
             except Exception as exc:
                 # The arm's own bug: stop it, report it, keep serving.
                 log.exception("executor failed on %s", command.code.name)
-                self.executor.halt(FailureReason.ARM_FAULT)
+                self._halt(FailureReason.ARM_FAULT)
                 return _failure(command, FailureReason.ARM_FAULT, f"executor error: {exc!r}")
             return StoredSuccess(command.code, result)
         # Cancelled by an emergency stop or the deadman (the contract: halted
         # within one control sample); make sure, then report why.
         reason = self._cancel_reason
-        self.executor.halt(reason)
+        self._halt(reason)
         return _failure(command, reason, f"halted by {reason.name.lower().replace('_', ' ')}")
+
+    # --- calling the executor: its bugs must not take the server down ---------------
+
+    def _halt(self, reason: FailureReason) -> None:
+        try:
+            self.executor.halt(reason)
+        except Exception:
+            # Nothing better to do than say so loudly: the command (if any) is
+            # cancelled regardless, and that is what stops a well-behaved arm.
+            log.exception("executor.halt(%s) failed", reason.name)
+
+    def _state_reply(self, command: Command) -> StoredReply:
+        try:
+            return StoredSuccess(command.code, CommandResult(self.executor.state()))
+        except Exception as exc:
+            log.exception("executor.state() failed")
+            return _failure(command, FailureReason.ARM_FAULT, f"state unavailable: {exc!r}")
 
     # --- the lease (deadman) and telemetry -------------------------------------------
 
@@ -525,7 +544,11 @@ class Server:
             listeners = [ln for ln in self._links if ln.role is not None and not ln.conn.closed]
             if not listeners:
                 continue
-            state = self.executor.state()
+            try:
+                state = self.executor.state()
+            except Exception:
+                log.exception("executor.state() failed; telemetry sample skipped")
+                continue
             now = trio.current_time()
             for ln in listeners:
                 if ln.pump.idle:

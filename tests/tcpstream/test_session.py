@@ -6,9 +6,12 @@ import pytest
 import trio
 
 from tcpstream import (
+    Command,
     CommandCode,
     CommandFailed,
+    CommandResult,
     FailureReason,
+    Feedback,
     LocalProtocolError,
     Refused,
     RefuseReason,
@@ -182,3 +185,46 @@ def test_server_full_refuses_with_a_reason() -> None:
             assert info.value.reason is RefuseReason.SERVER_FULL
 
     run(main)
+
+
+class BrokenArm(FakeArm):
+    """An executor with bugs: execute raises, and halt and state may too."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.state_broken = False
+
+    async def execute(self, command: Command) -> CommandResult:
+        if command.code is CommandCode.WEIGH:
+            raise ZeroDivisionError("scale divided by zero")
+        return await super().execute(command)
+
+    def halt(self, reason: FailureReason) -> None:
+        super().halt(reason)
+        raise RuntimeError("halt relay stuck")
+
+    def state(self) -> Feedback:
+        if self.state_broken:
+            raise RuntimeError("encoder offline")
+        return super().state()
+
+
+def test_executor_bugs_fail_the_command_not_the_server() -> None:
+    arm = BrokenArm()
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            with pytest.raises(CommandFailed) as info:
+                await c.weigh()
+            assert info.value.reason is FailureReason.ARM_FAULT
+            assert "scale divided by zero" in info.value.message
+            arm.state_broken = True
+            with pytest.raises(CommandFailed) as stop:
+                await c.emergency_stop()  # halts (raising), state unreadable
+            assert stop.value.reason is FailureReason.ARM_FAULT
+            await trio.sleep(1.0)  # telemetry keeps trying, skipping samples
+            arm.state_broken = False
+            assert (await c.status()).feedback.p == (0.5, 0.0, 0.4)
+
+    run(main)
+    assert arm.halts[:2] == [FailureReason.ARM_FAULT, FailureReason.STOPPED]
