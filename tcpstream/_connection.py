@@ -18,6 +18,7 @@ about commands once they are received (queue, executor, exactly-once memory).
 
 from __future__ import annotations
 
+import logging
 import math
 import struct
 from collections import deque
@@ -51,6 +52,9 @@ from ._packet import (
 from ._state import IllegalTransition, SessionState, Side, Trigger, transition
 
 __all__ = ["MAX_BAD_IN_A_ROW", "ConnectionStatistics", "_Connection"]
+
+trace = logging.getLogger("tcpstream.packets")
+"""The packet trace: set this logger to DEBUG to log every packet, decoded."""
 
 MAX_BAD_IN_A_ROW = 8
 """Consecutive rejected packets before the connection is given up.  A healthy
@@ -256,13 +260,16 @@ class _Connection:
 
     def _send(self, packet: Packet, now: float, *, tagged: bool = True) -> None:
         self._counter_out += 1
-        unsigned = encode_packet(_with(packet, counter=self._counter_out))
+        stamped = _with(packet, counter=self._counter_out)
+        unsigned = encode_packet(stamped)
         signed = unsigned[:SIGNED_SIZE]
         if tagged and self._session_key is not None:
             raw = signed + _auth.packet_tag(self._session_key, self._send_dir, signed)
         else:
             raw = unsigned
         self._out.append(raw)
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s out: %s", self.side.value, stamped.describe())
         self._last_out = now
         self._stats["packets_out"] += 1
 
@@ -289,6 +296,8 @@ class _Connection:
     def _reject(self, reason: FailureReason, message: str, request_id: int, now: float) -> None:
         self._stats["bad_packets"] += 1
         self._bad_in_a_row += 1
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s rejected: %s (%s)", self.side.value, message, reason.name)
         self._events.append(PacketRejected(reason, message))
         self._answer_rejected(reason, message, request_id, now)
         if self._bad_in_a_row >= MAX_BAD_IN_A_ROW and self._state is not SessionState.CLOSED:
@@ -323,6 +332,8 @@ class _Connection:
                 now,
             )
             return
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s in: %s", self.side.value, packet.describe())
         self._counter_in = packet.counter
         self._bad_in_a_row = 0
         self._last_in = now

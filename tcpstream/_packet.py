@@ -71,6 +71,7 @@ tag costs the attacker the connection (see the garbage limit in the session)."""
 SIGNED_SIZE = _HEADER.size + BODY_SIZE  # 200: the bytes the tag covers
 PACKET_SIZE = SIGNED_SIZE + TAG_SIZE  # 216
 
+_CODES = frozenset(int(c) for c in CommandCode)
 _ZERO_AUX = (0.0,) * AUX_WORDS
 _ZERO_BODY = bytes(BODY_SIZE)
 _ZERO_TAG = bytes(TAG_SIZE)
@@ -213,6 +214,26 @@ class Packet:
     def words(self) -> tuple[float, ...]:
         """The body as eighteen float64 words."""
         return _WORDS.unpack(self.body)
+
+    def describe(self) -> str:
+        """One line for a packet trace: kind, counter, request id, code, status, numbers."""
+        parts = [f"{self.kind.name} #{self.counter}"]
+        if self.request_id:
+            parts.append(f"rid={self.request_id}")
+        if self.code:
+            name = CommandCode(self.code).name if self.code in _CODES else str(self.code)
+            parts.append(f"code={name}")
+        if self.flags:
+            parts.append(f"flags={self.flags:#x}")
+        if self.status:
+            parts.append(f"status={self.status}")
+        if any(self.aux):
+            parts.append("aux=" + ",".join(f"{x:g}" for x in self.aux))
+        if self.kind in NUMERIC_KINDS and any(self.body):
+            parts.append("w=" + ",".join(f"{x:g}" for x in self.words()))
+        elif self.kind in (PacketKind.FAILED, PacketKind.REFUSE, PacketKind.BYE):
+            parts.append(repr(unpack_text(self.body)))
+        return " ".join(parts)
 
 
 def encode_packet(packet: Packet) -> bytes:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import logging
 
 import pytest
 
@@ -385,3 +386,21 @@ def test_idle_controller_is_released_but_not_while_a_command_runs() -> None:
 
 def _result() -> CommandResult:
     return CommandResult(Feedback((0.0,) * 6, 0.0, (0.0,) * 3, (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
+
+
+def test_packet_trace_logs_every_packet_decoded(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.DEBUG, logger="tcpstream.packets"):
+        pair = Pair(server_key=None, client_key=None).open()
+        pair.client.send_command(7, commands.move_joint(2, 0.5), 0.0)
+        pair.flush()
+    lines = [r.getMessage() for r in caplog.records if r.name == "tcpstream.packets"]
+    assert lines[0] == "client out: HELLO #1"
+    assert "server out: GRANT #1 aux=0.5,3,0,1024" in lines
+    assert (
+        "client out: COMMAND #2 rid=7 code=MOVE_JOINT w=2,0.5,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0"
+        in (lines)
+    )
+    assert (
+        "server in: COMMAND #2 rid=7 code=MOVE_JOINT w=2,0.5,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0"
+        in (lines)
+    )
