@@ -50,9 +50,10 @@ class ServerConfig:
     telemetry_every: int = 10
     """Telemetry every N-th control sample (seed 004 forwards every tenth); 0: none."""
     queue_size: int = 32
-    """Commands queued per arm.  A command at 2400 baud takes ~1 s to arrive, so 32
-    is half a minute of pipelined work -- more than any operator plans ahead, and
-    small enough that an emergency stop has little to flush."""
+    """Commands waiting per arm, besides the one running.  A command at 2400 baud
+    takes ~1 s to arrive, so 32 is half a minute of pipelined work -- more than
+    any operator plans ahead, and small enough that an emergency stop has little
+    to flush."""
     memory_size: int = DEFAULT_MEMORY_SIZE
     memory_identities: int = DEFAULT_IDENTITIES
     max_connections: int = 8

@@ -55,6 +55,7 @@ class Pump:
         self._timer_deadline = math.inf
         self._sending = False
         self._done = trio.Event()
+        self._reader_done = trio.Event()
         self.bytes_in = 0
         self.bytes_out = 0
 
@@ -102,6 +103,12 @@ class Pump:
             self._done.set()
 
     async def _reader(self) -> None:
+        try:
+            await self._read()
+        finally:
+            self._reader_done.set()
+
+    async def _read(self) -> None:
         conn = self.conn
         while conn.state is not SessionState.CLOSED:
             try:
@@ -133,6 +140,10 @@ class Pump:
         conn = self.conn
         while True:
             await self._wake.wait()
+            # One scheduling round before taking the output: whatever else is
+            # ready in this batch (an instant command's COMPLETED right after its
+            # ACCEPTED) goes out in the same write and segment.
+            await trio.lowlevel.cancel_shielded_checkpoint()
             self._wake = trio.Event()
             data = conn.data_to_send()
             if data:
@@ -143,7 +154,12 @@ class Pump:
                 try:
                     await self.stream.send_all(data)
                 except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    # The peer may have written its last words (a REFUSE, a BYE)
+                    # and closed before reading ours: let the reader take them
+                    # before the end of the stream is declared.
                     log.debug("stream failed while sending: %r", exc)
+                    with trio.move_on_after(CLOSE_TIMEOUT):
+                        await self._reader_done.wait()
                     conn.receive_data(b"", trio.current_time())
                     self.drain_events()
                     return

@@ -379,14 +379,18 @@ class Server:
                 _failure(command, FailureReason.TERMINATING, "the session is terminating"),
             )
             return
-        if len(self._queue) >= self.config.queue_size:
+        # Capacity is queue_size waiting plus the one running, counted the same
+        # whether or not the executor task has taken the head of the queue yet
+        # (which depends on scheduling, not on the protocol).
+        outstanding = len(self._queue) + (1 if self._running else 0)
+        if outstanding > self.config.queue_size:
             self._finish(
                 identity,
                 request_id,
                 _failure(
                     command,
                     FailureReason.QUEUE_FULL,
-                    f"{len(self._queue)} commands queued; wait for one to complete",
+                    f"{outstanding} commands queued or running; wait for one to complete",
                 ),
             )
             return

@@ -120,6 +120,7 @@ def test_queue_full_is_a_typed_failure() -> None:
 
     async def main() -> None:
         async with wired(arm, ServerConfig(queue_size=2)) as w, w.client() as c:
+            # Two waiting plus the one running fit; the fourth does not.
             handles = [await c.submit(commands.move_joint(1, 0.1)) for _ in range(4)]
             assert [await h.accepted() for h in handles[:3]] == [0, 1, 2]
             with pytest.raises(CommandFailed) as info:
