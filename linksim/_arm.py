@@ -148,6 +148,7 @@ class SimulatedArm:
         self._grip_force = 0.0
         self._error = FailureReason.NONE
         self._halt_reason: FailureReason | None = None
+        self._interrupted = False  # a motion was cancelled from outside, not yet halted
         self._motion_scope: trio.CancelScope | None = None
         self._busy = False
         self._frame = hand_frame(self._model, self._q)
@@ -199,6 +200,7 @@ class SimulatedArm:
             )
         self._busy = True
         self._halt_reason = None
+        self._interrupted = False
         self._commands += 1
         logger.debug("execute %s flags=%s", command.code.name, command.flags)
         try:
@@ -229,9 +231,16 @@ class SimulatedArm:
         return CommandResult(feedback or self.state(), aux)
 
     def halt(self, reason: FailureReason) -> None:
-        """Stop any motion now (idempotent); the reason shows in the error indicator."""
+        """Stop any motion now (idempotent).
+
+        When it stops a motion -- running, or just cancelled by the caller --
+        the reason shows in the error indicator; a halt of an arm at rest
+        changes nothing there.
+        """
         self._halts += 1
-        if reason is not FailureReason.NONE:
+        stopped = self._motion_scope is not None or self._interrupted
+        self._interrupted = False
+        if stopped and reason is not FailureReason.NONE:
             self._error = reason
         if self._motion_scope is not None:
             self._halt_reason = reason
@@ -313,6 +322,12 @@ class SimulatedArm:
                     every = self._config.telemetry_every
                     if self._telemetry is not None and self._samples % every == 0:
                         self._telemetry(self.state())
+            except trio.Cancelled:
+                # Ours (a halt) is caught by the scope below; anyone else's
+                # (the server's emergency stop) propagates, and the halt()
+                # that follows records why the motion ended.
+                self._interrupted = not scope.cancel_called
+                raise
             finally:
                 self._motion_scope = None
         if scope.cancelled_caught:

@@ -345,7 +345,7 @@ def test_halt_during_a_move_fails_it_with_stopped_at_once() -> None:
         arm = SimulatedArm(EMPTY)
         goal = HOME + np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         failures: list[CommandFailed] = []
-        stop_time = 0.3 + 0.5 / 125  # between two samples
+        stop_time = 0.3  # sample 37.5: between two samples
 
         async def mover() -> None:
             try:
@@ -418,3 +418,13 @@ def test_ik_solution_for_the_task_poses_is_the_elbow_up_hand_down_branch() -> No
     q = inverse(arm.model, target, HOME)
     assert q[2] < -math.pi  # elbow up, as at home
     assert singular_region(arm.model, q) is None
+
+
+def test_halt_of_an_arm_at_rest_leaves_the_error_indicator_alone() -> None:
+    async def main() -> None:
+        arm = SimulatedArm(EMPTY)
+        arm.halt(FailureReason.STOPPED)  # e.g. the server shutting down
+        assert arm.state().error is FailureReason.NONE
+        assert arm.statistics().halts == 1
+
+    run(main)

@@ -219,3 +219,20 @@ def test_rotation_about_matches_axis_angle() -> None:
         atol=1e-15,
     )
     np.testing.assert_array_equal(rotation_about(np.zeros(3)), np.eye(3))
+
+
+def test_kinematics_planning_and_world_modules_are_pure() -> None:
+    """The console's predictive model reuses these without trio or I/O."""
+    import ast
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[2] / "linksim"
+    forbidden = {"trio", "serial", "socket", "time", "random", "threading", "asyncio", "os"}
+    for module in ("_kinematics", "_trajectory", "_collision", "_world", "_tasks"):
+        names: set[str] = set()
+        for node in ast.walk(ast.parse((root / f"{module}.py").read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+        assert not names & forbidden, f"linksim/{module}.py imports {names & forbidden}"
