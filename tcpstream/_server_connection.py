@@ -284,6 +284,13 @@ class ServerConnection(_Connection):
         self._move(Trigger.COMMAND_IN)
         self._last_activity = now
         rid = packet.request_id
+        if rid == 0:
+            # 0 means "no request" in replies; a command named 0 could never be
+            # told apart from an unattributable rejection.
+            self._reject(
+                FailureReason.BAD_PACKET, "request id 0 is reserved; number from 1", 0, now
+            )
+            return
         if self.role is not Role.CONTROLLER:
             self.failed(
                 rid,

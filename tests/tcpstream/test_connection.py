@@ -404,3 +404,16 @@ def test_packet_trace_logs_every_packet_decoded(caplog: pytest.LogCaptureFixture
         "server in: COMMAND #2 rid=7 code=MOVE_JOINT w=2,0.5,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0"
         in (lines)
     )
+
+
+def test_request_id_zero_is_rejected() -> None:
+    pair = Pair(server_key=None, client_key=None).open()
+    raw = encode_packet(Packet(PacketKind.COMMAND, code=2, request_id=0, counter=2))
+    pair.server.receive_data(raw, 0.0)
+    assert received_commands(drain(pair.server)) == []
+    reply = decode_packet(pair.server.data_to_send())
+    assert (reply.kind, reply.status, reply.request_id) == (
+        PacketKind.FAILED,
+        FailureReason.BAD_PACKET,
+        0,
+    )

@@ -5,14 +5,18 @@ from __future__ import annotations
 import pytest
 import trio
 import trio.testing
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tcpstream import (
     PACKET_SIZE,
     ArmClient,
     ClientConnection,
     CloseReason,
+    Command,
     CommandCode,
     CommandFailed,
+    CommandResult,
     ControllerIdentity,
     FailureReason,
     PacketKind,
@@ -280,3 +284,47 @@ def test_an_arm_that_lost_its_memory_is_not_sent_the_command_again() -> None:
     run(main)
     assert second_arm.count(CommandCode.MOVE_JOINTS) == 0
     assert second_arm.count(CommandCode.STATUS) == 1
+
+
+class TimedArm(FakeArm):
+    """MOVE_JOINT takes ``amount`` seconds (args[1]), so each command has its own length."""
+
+    async def execute(self, command: Command) -> CommandResult:
+        self.executed.append(command)
+        await trio.sleep(command.args[1])
+        self.finished.append(command)
+        return CommandResult(self.state())
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    durations=st.lists(st.sampled_from([0.1, 0.5, 1.0, 2.5]), min_size=1, max_size=6),
+    breaks=st.lists(st.sampled_from([0.05, 0.3, 0.7, 1.1, 2.0]), max_size=4),
+    delay=st.sampled_from([0.05, 0.4, 1.5]),
+)
+def test_random_disconnects_never_run_a_command_twice(
+    durations: list[float], breaks: list[float], delay: float
+) -> None:
+    arm = TimedArm()
+
+    async def main() -> None:
+        async with (
+            wired(arm, PATIENT) as w,
+            w.client(reconnect_delay=delay, reconnect_attempts=10) as c,
+        ):
+            handles = [await c.submit(commands.move_joint(1, d)) for d in durations]
+
+            async def saboteur() -> None:
+                for gap in breaks:
+                    await trio.sleep(gap)
+                    await w.break_link()
+
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(saboteur)
+                results = [await h.completed() for h in handles]
+            assert len(results) == len(durations)
+
+    run(main)
+    # Each command ran exactly once, in request-id order, to completion.
+    assert [c.args[1] for c in arm.executed] == durations
+    assert [c.args[1] for c in arm.finished] == durations
