@@ -103,6 +103,14 @@ class ArmStatistics:
     last_error: FailureReason
 
 
+def _six(q: Array) -> tuple[float, float, float, float, float, float]:
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]), float(q[4]), float(q[5]))
+
+
+def _vec(v: Array) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
 def _command_failed(reason: FailureReason, message: str, aux: Aux = NO_AUX) -> CommandFailed:
     return CommandFailed(reason, message, aux=aux)
 
@@ -251,11 +259,11 @@ class SimulatedArm:
         p, s, a = psa(self._frame)
         tactile = self._grasped is not None
         return Feedback(
-            joints=tuple(float(x) for x in self._q),  # type: ignore[arg-type]
+            joints=_six(self._q),
             finger_opening=float(self._opening),
-            p=(float(p[0]), float(p[1]), float(p[2])),
-            s=(float(s[0]), float(s[1]), float(s[2])),
-            a=(float(a[0]), float(a[1]), float(a[2])),
+            p=_vec(p),
+            s=_vec(s),
+            a=_vec(a),
             tactile_left=tactile,
             tactile_right=tactile,
             error=self._error,
@@ -439,10 +447,10 @@ class SimulatedArm:
         now = self.state()
         return dataclasses.replace(
             now,
-            joints=tuple(float(x) for x in q),  # type: ignore[arg-type]
-            p=(float(p[0]), float(p[1]), float(p[2])),
-            s=(float(s[0]), float(s[1]), float(s[2])),
-            a=(float(a[0]), float(a[1]), float(a[2])),
+            joints=_six(q),
+            p=_vec(p),
+            s=_vec(s),
+            a=_vec(a),
             error=FailureReason.NONE,
         )
 
@@ -555,16 +563,27 @@ class SimulatedArm:
             obj.position[2] = self._world.rest_height(self._grasped)
             self._grasped = None
             self._grip_force = 0.0
+        elif target < self._opening:
+            # "Opening" to less than now closes the fingers: they stop on
+            # whatever is between them, as CLOSE_FINGERS does.
+            await self._close_to(target)
+            return NO_AUX
         samples, step = self._move_fingers(target)
         await self._play(samples, step)
         return NO_AUX
 
     async def _close_fingers(self, command: Command) -> Aux:
+        if self._grasped is None:
+            await self._close_to(0.0)
+        return NO_AUX
+
+    async def _close_to(self, limit: float) -> None:
+        """Close the fingers to ``limit`` or until both tactile switches touch an object."""
         p, s, a = psa(self._frame)
         index = self._world.between_fingers(p, s, a, self._opening)
-        final = 0.0 if index is None else self._world.objects[index].size
-        if index is not None and index == self._grasped:
-            return NO_AUX
+        if index is not None and self._world.objects[index].size <= limit:
+            index = None  # the fingers stop before they reach it
+        final = limit if index is None else self._world.objects[index].size
         samples, step = self._move_fingers(min(final, self._opening))
         await self._play(samples, step)
         if index is not None:
@@ -574,7 +593,6 @@ class SimulatedArm:
             obj.position = obj.position - (d @ s) * s
             self._grasped = index
             self._grasp_offset = self._frame[:3, :3].T @ (obj.position - p)
-        return NO_AUX
 
     def _holding(self, what: str) -> int:
         if self._grasped is None:
@@ -593,13 +611,14 @@ class SimulatedArm:
                 FailureReason.BAD_ARGUMENT,
                 f"grip force {force} N exceeds the gripper's {self._config.max_grip_force} N",
             )
-        await self._play(round(SQUEEZE_TIME * self.control_rate_hz), lambda k: None)
+        await self._play(math.ceil(SQUEEZE_TIME * self.control_rate_hz - 1e-9), lambda k: None)
         self._grip_force = force
         return (force, 0.0, 0.0, 0.0)
 
     async def _weigh(self, command: Command) -> Aux:
         index = self._holding("weigh")
-        await self._play(round(self._config.weigh_time * self.control_rate_hz), lambda k: None)
+        samples = math.ceil(self._config.weigh_time * self.control_rate_hz - 1e-9)
+        await self._play(samples, lambda k: None)
         mass = self._world.objects[index].mass
         noise = self._config.weigh_noise
         measured = mass + (float(self._rng.normal(0.0, noise)) if noise > 0 else 0.0)

@@ -3,6 +3,7 @@ noisy Earth-Moon line -> tcpstream server -> SimulatedArm, on the virtual clock.
 
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 import trio
 import trio.testing
 
-from linksim import serial_socket_pair
+from linksim import LinkConfig, serial_socket_pair
 from linksim._arm import SimulatedArm
 from linksim._tasks import rock_task
 from linksim._world import DEFAULT_WORLD
@@ -26,18 +27,25 @@ from tcpstream import (
 
 KEY = b"rock-task-end-to-end-key"
 
+# The noisy-moon preset (2400 bit/s, 1.3 s each way, fades) with ten times
+# its background byte-error rate, so the ARQ certainly has work to do in a
+# session of only a few kilobytes.
+NOISY_MOON = LinkConfig.preset("noisy-moon", seed=3)
+LINE = LinkConfig.symmetric(dataclasses.replace(NOISY_MOON.a_to_b, byte_error_rate=1e-3), seed=3)
+
 
 def test_rock_task_over_a_noisy_moon_serial_link() -> None:
     task = rock_task(DEFAULT_WORLD)
     arm = SimulatedArm(DEFAULT_WORLD)
     results: list[CommandResult] = []
     refused: list[CommandFailed] = []
+    retransmissions: list[int] = []
 
     async def main() -> None:
         # 1.3 s each way at 2400 bit/s: a 216-byte packet takes ~1 s to serialise.
         config = ServerConfig(key=KEY, rtt_hint=6.0, telemetry_every=1250)
         async with (
-            serial_socket_pair("noisy-moon", seed=3) as (client_end, server_end),
+            serial_socket_pair(LINE) as (client_end, server_end),
             trio.open_nursery() as nursery,
         ):
             nursery.start_soon(partial(serve_stream, arm, server_end, config=config))
@@ -49,6 +57,8 @@ def test_rock_task_over_a_noisy_moon_serial_link() -> None:
                     refused.append(exc)
                 for command in task.commands:
                     results.append(await client.send(command))
+            for end in (client_end, server_end):
+                retransmissions.append(end.statistics().link.retransmissions)
             nursery.cancel_scope.cancel()
 
     trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
@@ -69,6 +79,7 @@ def test_rock_task_over_a_noisy_moon_serial_link() -> None:
     assert rock.position[2] == pytest.approx(task.bin_top + 0.035)
     assert arm.grasped is None
     assert arm.state().finger_opening == pytest.approx(DEFAULT_WORLD.max_opening)
-    # Exactly once: one execution per command despite the noisy line.
+    # Exactly once: one execution per command although packets were lost and resent.
+    assert sum(retransmissions) > 0, retransmissions
     stats = arm.statistics()
     assert (stats.commands, stats.completed, stats.failed) == (12, 11, 1)

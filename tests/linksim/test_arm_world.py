@@ -214,3 +214,26 @@ def test_object_wider_than_the_opening_is_not_grasped() -> None:
         assert arm.grasped is None
 
     run(main)
+
+
+def test_narrowing_the_opening_stops_on_an_object_between_the_fingers() -> None:
+    async def main() -> None:
+        config = WorldConfig(
+            initial_joints=HOME,
+            objects=(ObjectSpec("rock", (0.39882, -0.15005, 0.065), 0.06, 0.85),),
+        )
+        arm = SimulatedArm(config)
+        wider = await arm.execute(Command(CommandCode.OPEN_FINGERS, (0.07,)))
+        assert wider.feedback.finger_opening == pytest.approx(0.07)
+        assert arm.grasped is None
+        gripped = await arm.execute(Command(CommandCode.OPEN_FINGERS, (0.03,)))
+        assert gripped.feedback.finger_opening == pytest.approx(0.06)
+        assert gripped.feedback.tactile_left
+        assert arm.grasped == "rock"
+        # Closing again on the held rock changes nothing and takes no time.
+        t0 = trio.current_time()
+        again = await arm.execute(Command(CommandCode.CLOSE_FINGERS))
+        assert again.feedback == gripped.feedback
+        assert trio.current_time() == t0
+
+    run(main)
