@@ -93,14 +93,37 @@ class Pump:
                 await self._writer()
                 nursery.cancel_scope.cancel()
         finally:
-            with trio.move_on_after(CLOSE_TIMEOUT) as scope:
-                scope.shield = True
-                try:
-                    await self.stream.aclose()
-                except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
-                    # A TLS close_notify into a dead socket, say: closed anyway.
-                    log.debug("closing the stream failed: %r", exc)
+            await self._close_stream()
             self._done.set()
+
+    async def _close_stream(self) -> None:
+        """Lingering close: half-close, let the peer's last bytes drain, then close.
+
+        Closing outright while the peer still sends makes some streams throw
+        away what was in flight *towards us as well as from us* (TCP answers
+        with a reset; a serial socket refuses the data and aborts), so a BYE or
+        a final COMPLETED could be lost.  Bounded by the dead time (the peer
+        hears the BYE within a round trip) and never shorter than CLOSE_TIMEOUT.
+        """
+        params = self.conn.parameters
+        linger = max(CLOSE_TIMEOUT, params.dead_time if params is not None else 0.0)
+        errors = (trio.BrokenResourceError, trio.ClosedResourceError, OSError)
+        with trio.move_on_after(linger) as scope:
+            scope.shield = True
+            if isinstance(self.stream, trio.abc.HalfCloseableStream):
+                try:
+                    await self.stream.send_eof()
+                    while await self.stream.receive_some(RECEIVE_CHUNK):
+                        pass  # after CLOSED nothing more is read; just let it drain
+                except errors as exc:
+                    log.debug("lingering close ended early: %r", exc)
+        with trio.move_on_after(CLOSE_TIMEOUT) as scope:
+            scope.shield = True
+            try:
+                await self.stream.aclose()
+            except errors as exc:
+                # A TLS close_notify into a dead socket, say: closed anyway.
+                log.debug("closing the stream failed: %r", exc)
 
     async def _reader(self) -> None:
         try:

@@ -51,6 +51,18 @@ def test_session_over_noisy_moon_serial_socket(seed: int) -> None:
                     handles = [await c.submit(commands.move_joint(j, 0.05)) for j in (1, 2, 3)]
                     for h in handles:
                         await h.completed()
+                    # An emergency stop crosses the line ahead of nothing and stops
+                    # a long move long before it would have finished.
+                    arm.move_time = 600.0
+                    long_move = await c.submit(commands.move_joints([0.3] * 6))
+                    await long_move.accepted()
+                    t0 = trio.current_time()
+                    await c.emergency_stop()
+                    with pytest.raises(CommandFailed) as stopped:
+                        await long_move.completed()
+                    assert stopped.value.reason is FailureReason.STOPPED
+                    assert trio.current_time() - t0 < 30.0
+                    arm.move_time = 4.0
                     arm.fail[CommandCode.WEIGH] = FailureReason.NOT_GRASPING
                     with pytest.raises(CommandFailed) as info:
                         await c.weigh()
@@ -59,7 +71,8 @@ def test_session_over_noisy_moon_serial_socket(seed: int) -> None:
                     # The moon is far: ~5 s per round trip, 3 x 4 s of motion.
                     assert trio.current_time() > 30.0
                 stats = server.statistics()
-                assert stats.commands_completed == 5
+                assert stats.commands_completed == 6  # five commands and the stop
+                assert stats.emergency_stops == 1
                 assert stats.bad_packets == 0  # the serial socket delivered every byte intact
                 assert stats.deadman_trips == 0
 
@@ -69,5 +82,7 @@ def test_session_over_noisy_moon_serial_socket(seed: int) -> None:
         CommandCode.MOVE_JOINT,
         CommandCode.MOVE_JOINT,
         CommandCode.MOVE_JOINT,
+        CommandCode.MOVE_JOINTS,
         CommandCode.WEIGH,
     ]
+    assert FailureReason.STOPPED in arm.halts
