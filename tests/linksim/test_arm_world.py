@@ -225,7 +225,7 @@ def test_narrowing_the_opening_stops_on_an_object_between_the_fingers() -> None:
         arm = SimulatedArm(config)
         wider = await arm.execute(Command(CommandCode.OPEN_FINGERS, (0.07,)))
         assert wider.feedback.finger_opening == pytest.approx(0.07)
-        assert arm.grasped is None
+        assert arm.statistics().grasping is None
         gripped = await arm.execute(Command(CommandCode.OPEN_FINGERS, (0.03,)))
         assert gripped.feedback.finger_opening == pytest.approx(0.06)
         assert gripped.feedback.tactile_left
