@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import secrets
 import ssl
+from collections.abc import Callable
 from typing import Any, NoReturn
 
 import trio
@@ -69,15 +71,25 @@ def connect_tcp(
     host: str,
     port: int = DEFAULT_PORT,
     *,
+    identity: str = "controller",
+    key: bytes | None = None,
+    observer: bool = False,
     ssl_context: ssl.SSLContext | None = None,
     server_hostname: str | None = None,
-    observer: bool = False,
-    **options: Any,
+    reconnect_attempts: int = 3,
+    reconnect_delay: float = 0.5,
+    handshake_timeout: float = 30.0,
+    max_in_flight: int = 32,
+    incarnation: int | None = None,
+    nonce_source: Callable[[int], bytes] = secrets.token_bytes,
 ) -> ArmClient:
     """``async with connect_tcp(host, port, key=..., identity=...) as arm:``.
 
-    Reconnects (and resumes) by opening a new TCP connection to the same place.
-    ``options`` are :class:`ArmClient` keyword arguments.
+    Reconnects (and resumes, section 9 of PROTOCOL.md) by opening a new TCP
+    connection to the same place, ``reconnect_attempts`` times at most.  With
+    ``ssl_context`` the stream is TLS (``server_hostname`` defaults to ``host``).
+    ``incarnation`` (default: random) and ``nonce_source`` (default:
+    :func:`secrets.token_bytes`) are for reproducible runs; see :class:`ArmClient`.
     """
 
     async def factory() -> trio.abc.Stream:
@@ -92,22 +104,39 @@ def connect_tcp(
             raise
         return tls
 
-    role = Role.OBSERVER if observer else Role.CONTROLLER
-    return ArmClient(factory, role=role, **options)
+    return ArmClient(
+        factory,
+        identity=identity,
+        key=key,
+        role=Role.OBSERVER if observer else Role.CONTROLLER,
+        reconnect_attempts=reconnect_attempts,
+        reconnect_delay=reconnect_delay,
+        handshake_timeout=handshake_timeout,
+        max_in_flight=max_in_flight,
+        incarnation=incarnation,
+        nonce_source=nonce_source,
+    )
 
 
 def connect_stream(
     stream: trio.abc.Stream,
     *,
-    reconnect: StreamFactory | None = None,
+    identity: str = "controller",
+    key: bytes | None = None,
     observer: bool = False,
-    **options: Any,
+    reconnect: StreamFactory | None = None,
+    reconnect_attempts: int = 3,
+    reconnect_delay: float = 0.5,
+    handshake_timeout: float = 30.0,
+    max_in_flight: int = 32,
+    incarnation: int | None = None,
+    nonce_source: Callable[[int], bytes] = secrets.token_bytes,
 ) -> ArmClient:
     """``async with connect_stream(serial_socket, key=...) as arm:`` over any trio stream.
 
     ``reconnect``, when given, opens a replacement stream after a failure
     (for example: dial again and open a new serial socket); without it a
-    broken stream ends the client.
+    broken stream ends the client (pending commands fail with SessionClosed).
     """
     first: list[trio.abc.Stream] = [stream]
 
@@ -118,5 +147,15 @@ def connect_stream(
             raise OSError("the stream broke and no reconnect factory was given")
         return await reconnect()
 
-    role = Role.OBSERVER if observer else Role.CONTROLLER
-    return ArmClient(factory, role=role, **options)
+    return ArmClient(
+        factory,
+        identity=identity,
+        key=key,
+        role=Role.OBSERVER if observer else Role.CONTROLLER,
+        reconnect_attempts=reconnect_attempts if reconnect is not None else 0,
+        reconnect_delay=reconnect_delay,
+        handshake_timeout=handshake_timeout,
+        max_in_flight=max_in_flight,
+        incarnation=incarnation,
+        nonce_source=nonce_source,
+    )

@@ -134,7 +134,13 @@ class ArmClient:
     Prefer :func:`connect_tcp` / :func:`connect_stream` to building one.
     ``stream_factory`` opens a fresh stream; it is called for the first
     connection and for every reconnection (``reconnect_attempts`` in a row at
-    most, ``reconnect_delay`` apart, doubling).
+    most, ``reconnect_delay`` apart, doubling).  ``identity`` names the
+    controller to the arm (1..32 bytes of UTF-8); ``incarnation`` (default:
+    random, chosen once per client) keys the arm's exactly-once memory --
+    pass one only for reproducible runs, never reuse one across controller
+    restarts.  ``nonce_source`` (default :func:`secrets.token_bytes`) makes
+    handshakes reproducible in tests; never replace it in production.
+    ``max_in_flight`` bounds commands submitted and not yet answered.
     """
 
     def __init__(
