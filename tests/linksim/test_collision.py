@@ -22,9 +22,10 @@ def box_strategy() -> st.SearchStrategy[np.ndarray]:
     return st.builds(build, point, sizes)
 
 
-def distance_to_box(p: np.ndarray, box: np.ndarray) -> float:
+def distance_to_box(points: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """Euclidean distance from each point (n, 3) to the box (0 inside)."""
     lo, hi = box[0::2], box[1::2]
-    return float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - p, p - hi))))
+    return np.asarray(np.linalg.norm(np.maximum(0.0, np.maximum(lo - points, points - hi)), axis=1))
 
 
 @given(point, point, box_strategy())
@@ -36,7 +37,7 @@ def test_slab_test_agrees_with_the_closest_point(
     hit = bool(segments_hit_boxes(back, front, box[None, :])[0])
     # Independent oracle: the distance from the box to 2001 points on the segment.
     lam = np.linspace(0.0, 1.0, 2001)[:, None]
-    nearest = min(distance_to_box(p, box) for p in back + lam * (front - back))
+    nearest = float(distance_to_box(back + lam * (front - back), box).min())
     step = float(np.linalg.norm(front - back)) / 2000
     if hit:
         assert nearest <= step  # some point of the segment is within one step of the box

@@ -58,9 +58,12 @@ def test_joint_move_timed_by_the_slowest_joint(delta: np.ndarray, speed: float) 
         return
     exact = QUINTIC_PEAK_RATE * worst * RATE
     assert exact - 1e-6 <= move.samples <= math.ceil(exact) + 1e-9
-    samples = np.array([move.at(k) for k in range(move.samples + 1)])
+    u = np.arange(move.samples + 1) / move.samples
+    samples = move.at_fraction(u)
     np.testing.assert_array_equal(samples[0], start)
-    np.testing.assert_allclose(samples[-1], delta, atol=1e-12)
+    np.testing.assert_array_equal(move.at(move.samples), start + delta)
+    for k in (1, move.samples // 2, move.samples - 1):
+        np.testing.assert_allclose(move.at(k), samples[k], atol=1e-15)
     # All joints follow the one normalised polynomial: they start and stop together
     # and each moves monotonically (never outside its start..goal range).
     steps = np.diff(samples, axis=0) * np.sign(delta)
