@@ -229,3 +229,21 @@ def test_executor_bugs_fail_the_command_not_the_server() -> None:
 
     run(main)
     assert arm.halts[:2] == [FailureReason.ARM_FAULT, FailureReason.STOPPED]
+
+
+def test_commands_after_terminate_are_refused_and_the_queue_before_it_drains() -> None:
+    arm = FakeArm(move_time=1.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            move = await c.submit(commands.move_joint(1, 0.1))
+            end = await c.submit(commands.terminate())
+            late = await c.submit(commands.status())
+            await move.completed()  # queued before TERMINATE: runs
+            await end.completed()
+            with pytest.raises(CommandFailed) as info:
+                await late.completed()
+            assert info.value.reason is FailureReason.TERMINATING
+
+    run(main)
+    assert [c.code for c in arm.executed] == [CommandCode.MOVE_JOINT]

@@ -10,10 +10,12 @@ from tcpstream import (
     PACKET_SIZE,
     TRANSITIONS,
     ClientConnection,
+    CloseReason,
     CommandReceived,
     ControllerIdentity,
     ControlRequested,
     EmergencyStopRequested,
+    Granted,
     IllegalTransition,
     LocalProtocolError,
     Packet,
@@ -155,3 +157,62 @@ def test_client_api_misuse_is_a_local_error() -> None:
         client.connect(0.0)
     with pytest.raises(LocalProtocolError, match="request id"):
         client.send_command(0, commands.status(), 0.0)
+
+
+@st.composite
+def client_inputs(draw: st.DrawFn) -> list[tuple[str, object]]:
+    steps: list[tuple[str, object]] = []
+    for _ in range(draw(st.integers(1, 25))):
+        what = draw(st.sampled_from(["packet", "garbage", "timer", "command", "close"]))
+        if what == "packet":
+            kind = draw(st.sampled_from(KINDS))
+            code = draw(st.sampled_from([0, 2, 6, 99]))
+            counter = draw(st.integers(0, 40))
+            flags = draw(st.integers(0, 2))
+            status = draw(st.integers(0, 40))
+            aux = draw(st.sampled_from([(0.0,) * 4, (0.5, 3.0, 0.0, 1024.0), (1.0, 0.5, 0.0, 0.0)]))
+            steps.append((what, (kind, code, counter, flags, status, aux)))
+        elif what == "garbage":
+            steps.append((what, draw(st.binary(min_size=1, max_size=2 * PACKET_SIZE))))
+        elif what == "timer":
+            steps.append((what, draw(st.floats(0, 60))))
+        else:
+            steps.append((what, None))
+    return steps
+
+
+@given(client_inputs(), st.booleans())
+def test_client_survives_any_input_sequence(steps: list[tuple[str, object]], keyed: bool) -> None:
+    client = ClientConnection(ControllerIdentity("c", 1), key=b"k" * 16 if keyed else None)
+    client.connect(0.0)
+    client.data_to_send()
+    now = 0.0
+    for what, arg in steps:
+        before = client.state
+        try:
+            if what == "packet":
+                kind, code, counter, flags, status, aux = arg  # type: ignore[misc]
+                raw = encode_packet(
+                    Packet(kind, flags, code, status, 1, counter, aux, words_body([0.0] * 18))
+                )
+                client.receive_data(raw, now)
+            elif what == "garbage":
+                client.receive_data(arg, now)  # type: ignore[arg-type]
+            elif what == "timer":
+                now = max(now, float(arg))  # type: ignore[arg-type]
+                client.handle_timer(now)
+            elif what == "command":
+                client.send_command(1, commands.status(), now)
+            else:
+                client.close(CloseReason.NORMAL, now)
+        except IllegalTransition:
+            assert what == "command"
+            assert client.state is before
+        while (ev := client.next_event()) is not None:
+            if isinstance(ev, Granted):
+                # A keyed client is never granted by an unauthenticated packet.
+                assert not keyed
+        out = client.data_to_send()
+        assert len(out) % PACKET_SIZE == 0
+        if before is SessionState.CLOSED:
+            assert out == b""
