@@ -16,11 +16,12 @@ apart from :meth:`WorldConfig.from_toml`, which reads the file it is given.
 
 from __future__ import annotations
 
+import json
 import math
 import pathlib
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -151,11 +152,8 @@ class WorldConfig:
     control_rate_hz: float = 125.0
     telemetry_every: int = 10
     seed: int = 0
-    extra: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.extra:
-            raise ConfigError(f"unknown world setting(s): {', '.join(sorted(self.extra))}")
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
         object.__setattr__(self, "objects", tuple(self.objects))
         if len(self.obstacles) > MAX_OBSTACLES:
@@ -204,9 +202,11 @@ class WorldConfig:
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any]) -> WorldConfig:
         """Build from a parsed TOML document (see :meth:`from_toml` for the layout)."""
-        known = {f.name for f in fields(cls)} - {"extra", "obstacles", "objects"}
+        known = {f.name for f in fields(cls)} - {"obstacles", "objects"}
         kwargs: dict[str, Any] = {k: v for k, v in data.items() if k in known}
-        extra = {k: v for k, v in data.items() if k not in known | {"obstacles", "objects"}}
+        extra = sorted(k for k in data if k not in known | {"obstacles", "objects"})
+        if extra:
+            raise ConfigError(f"unknown world setting(s): {', '.join(extra)}")
         obstacles = []
         for i, o in enumerate(data.get("obstacles", [])):
             if not isinstance(o, Mapping) or set(o) - {"name"} != {"min", "max"}:
@@ -220,7 +220,7 @@ class WorldConfig:
         for key in ("initial_joints", "max_joint_velocity"):
             if key in kwargs and isinstance(kwargs[key], list):
                 kwargs[key] = tuple(kwargs[key])
-        return cls(obstacles=tuple(obstacles), objects=tuple(objects), extra=extra, **kwargs)
+        return cls(obstacles=tuple(obstacles), objects=tuple(objects), **kwargs)
 
     @classmethod
     def from_toml(cls, source: str | pathlib.Path) -> WorldConfig:
@@ -240,6 +240,33 @@ class WorldConfig:
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"world TOML does not parse: {exc}") from exc
         return cls.from_mapping(data)
+
+    def to_toml(self) -> str:
+        """This configuration as TOML text that :meth:`from_toml` reads back equal."""
+
+        def value(v: Any) -> str:
+            if isinstance(v, bool):
+                return "true" if v else "false"
+            if isinstance(v, int | float):
+                return repr(v)
+            if isinstance(v, str):
+                # JSON's string escapes are a subset of TOML basic strings'.
+                return json.dumps(v)
+            return "[" + ", ".join(value(x) for x in v) + "]"
+
+        lines = [
+            f"{f.name} = {value(getattr(self, f.name))}"
+            for f in fields(self)
+            if f.name not in ("obstacles", "objects")
+        ]
+        for o in self.obstacles:
+            lines += ["", "[[obstacles]]", f"name = {value(o.name)}"]
+            lines += [f"min = {value(o.minimum)}", f"max = {value(o.maximum)}"]
+        for b in self.objects:
+            lines += ["", "[[objects]]", f"name = {value(b.name)}"]
+            lines += [f"position = {value(b.position)}", f"size = {value(b.size)}"]
+            lines += [f"mass = {value(b.mass)}"]
+        return "\n".join(lines) + "\n"
 
 
 DEFAULT_WORLD = WorldConfig(

@@ -52,6 +52,16 @@ def test_toml_world_loads_from_text_and_file(tmp_path: pathlib.Path) -> None:
     assert WorldConfig.from_toml(path) == config
 
 
+def test_to_toml_round_trips() -> None:
+    assert WorldConfig.from_toml(DEFAULT_WORLD.to_toml()) == DEFAULT_WORLD
+    odd = WorldConfig(
+        objects=(ObjectSpec('a "quoted"\\ name\nwith a newline', (0, 0, 0), 0.1, 1.0),),
+        initial_joints=HOME,
+        max_joint_velocity=(0.5, 0.5, 0.5, 1.0, 1e-3, 1.0),
+    )
+    assert WorldConfig.from_toml(odd.to_toml()) == odd
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
