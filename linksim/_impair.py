@@ -117,11 +117,16 @@ class _Segment:
         return t if isinstance(t, float) else float(t[self.offset])
 
     def arrived_by(self, now: float) -> int:
-        """Index after the last byte that has arrived by ``now``."""
+        """Index after the last byte that has arrived by ``now`` (never before ``offset``).
+
+        ``now`` may be a hair earlier than a previous call's (a reader woken
+        by its timer uses the target time, the next call the clock, which
+        can round just below it); bytes already delivered stay delivered.
+        """
         t = self.times
         if isinstance(t, float):
             return len(self.data) if t <= now else self.offset
-        return int(np.searchsorted(t, now, side="right"))
+        return max(self.offset, int(np.searchsorted(t, now, side="right")))
 
 
 class _FaultState:

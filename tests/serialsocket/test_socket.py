@@ -36,7 +36,12 @@ def run(fn: Callable[[], Awaitable[None]]) -> None:
 LINKS = {
     "clean": LinkConfig.preset("clean"),
     "geo": LinkConfig.preset("geo"),
+    "moon": LinkConfig.preset("moon"),
 }
+# The rate-limited Earth-Moon line: trio's duplex check moves 1 MiB each way
+# at 9600 bit/s, about an hour of link time.  check_half_closeable_stream
+# runs check_two_way_stream first, so moon runs once, there.
+HALF_CLOSEABLE = ["clean", "geo", pytest.param("moon", marks=pytest.mark.slow)]
 
 
 def maker_for(
@@ -59,7 +64,7 @@ def maker_for(
     return maker
 
 
-@pytest.mark.parametrize("name", sorted(LINKS))
+@pytest.mark.parametrize("name", HALF_CLOSEABLE)
 def test_check_half_closeable_stream(name: str) -> None:
     async def main() -> None:
         async with trio.open_nursery() as nursery:
