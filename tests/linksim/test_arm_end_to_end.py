@@ -13,9 +13,11 @@ import trio.testing
 
 from linksim import LinkConfig, serial_socket_pair
 from linksim._arm import SimulatedArm
+from linksim._kinematics import hand_frame
 from linksim._tasks import rock_task
 from linksim._world import DEFAULT_WORLD
 from tcpstream import (
+    Command,
     CommandCode,
     CommandFailed,
     CommandResult,
@@ -83,3 +85,39 @@ def test_rock_task_over_a_noisy_moon_serial_link() -> None:
     assert sum(retransmissions) > 0, retransmissions
     stats = arm.statistics()
     assert (stats.commands, stats.completed, stats.failed) == (12, 11, 1)
+
+
+def test_emergency_stop_over_the_link_halts_the_arm_mid_move() -> None:
+    arm = SimulatedArm(DEFAULT_WORLD)
+    goal = np.array(DEFAULT_WORLD.initial_joints) + np.array([-1.2, 0, 0, 0, 0, 0])
+    outcome: list[CommandFailed] = []
+
+    async def main() -> None:
+        async with (
+            serial_socket_pair("moon", seed=1) as (client_end, server_end),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(partial(serve_stream, arm, server_end, rtt_hint=3.0))
+            async with connect_stream(client_end) as client:
+                # Slowly: the stop needs 1.3 s to reach the Moon, the news of
+                # acceptance as long to come back.
+                await client.change_speed(0.2)
+                move = await client.submit(Command(CommandCode.MOVE_JOINTS, tuple(goal)))
+                await move.accepted()
+                await trio.sleep(0.5)  # the move is under way at the far end
+                await client.emergency_stop()
+                with pytest.raises(CommandFailed) as info:
+                    await move.completed()
+                outcome.append(info.value)
+            nursery.cancel_scope.cancel()
+
+    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+    assert outcome[0].reason is FailureReason.STOPPED
+    # The 11.25 s move was stopped part way, the arm at rest and consistent.
+    q = arm.joints
+    home = np.array(DEFAULT_WORLD.initial_joints)
+    assert goal[0] < q[0] < home[0]
+    np.testing.assert_array_equal(q[1:], home[1:])
+    np.testing.assert_allclose(arm.state().p, hand_frame(arm.model, q)[:3, 3])
+    assert not arm.statistics().moving
+    assert arm.state().error is FailureReason.STOPPED
