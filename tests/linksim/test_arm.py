@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 import trio
 import trio.testing
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from linksim._arm import SimulatedArm
 from linksim._collision import first_collision
 from linksim._kinematics import (
+    PUMA560,
     SINGULAR_THRESHOLDS,
     Singularity,
     frame_from_psa,
@@ -426,5 +429,29 @@ def test_halt_of_an_arm_at_rest_leaves_the_error_indicator_alone() -> None:
         arm.halt(FailureReason.STOPPED)  # e.g. the server shutting down
         assert arm.state().error is FailureReason.NONE
         assert arm.statistics().halts == 1
+
+    run(main)
+
+
+@settings(max_examples=40)
+@given(st.tuples(*(st.floats(lo, hi) for lo, hi in zip(PUMA560.lower, PUMA560.upper, strict=True))))
+def test_any_reachable_pose_is_reached_exactly_in_the_planned_time(q: tuple[float, ...]) -> None:
+    """Property: in an empty world every non-singular pose the arm can hold, it reaches."""
+    arm = SimulatedArm(EMPTY)
+    target = hand_frame(arm.model, np.array(q))
+    if singular_region(arm.model, np.array(q)) is not None:
+        return
+    args = (*target[:3, 3], *target[:3, 1], *target[:3, 2])
+
+    async def main() -> None:
+        result = await arm.execute(
+            Command(CommandCode.MOVE_TO_POSITION, args, CommandFlags.SPECIFIED_ORIENTATION)
+        )
+        np.testing.assert_allclose(hand_frame(arm.model, arm.joints), target, atol=1e-7)
+        np.testing.assert_allclose(result.feedback.p, target[:3, 3], atol=1e-7)
+        # Seed 000's timing: the slowest joint at its maximum velocity.
+        vmax = np.array(EMPTY.max_joint_velocity)
+        slowest = QUINTIC_PEAK_RATE * np.max(np.abs(arm.joints - HOME) / vmax)
+        assert trio.current_time() == pytest.approx(math.ceil(slowest * 125 - 1e-9) / 125)
 
     run(main)

@@ -25,6 +25,7 @@ from linksim._kinematics import (
     psa,
     rotation_about,
     singular_region,
+    singularity_measures,
     wrap_to_limits,
 )
 from tcpstream._commands import CommandFailed, FailureReason
@@ -236,3 +237,29 @@ def test_kinematics_planning_and_world_modules_are_pure() -> None:
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names.add(node.module.split(".")[0])
         assert not names & forbidden, f"linksim/{module}.py imports {names & forbidden}"
+
+
+@given(joint_vectors())
+def test_each_singular_measure_at_zero_is_a_rank_loss_of_the_jacobian(q: np.ndarray) -> None:
+    """The analytic measures are where the Jacobian really loses rank."""
+    a3, d4 = PUMA560.a[2], PUMA560.d[3]
+    exact = []
+    wrist = q.copy()
+    wrist[4] = 0.0
+    exact.append(wrist)
+    elbow = q.copy()
+    elbow[2] = math.atan2(a3, d4) - math.pi / 2 + math.pi * (q[2] > -math.pi / 2)
+    exact.append(elbow)
+    # Shoulder: r = u cos q2 - v sin q2 = 0 (wrist centre on the joint-1 axis line).
+    shoulder = q.copy()
+    u = PUMA560.a[1] + a3 * math.cos(q[2]) - d4 * math.sin(q[2])
+    v = a3 * math.sin(q[2]) + d4 * math.cos(q[2])
+    shoulder[1] = math.atan2(u, v)
+    exact.append(shoulder)
+    for s in exact:
+        m = singularity_measures(PUMA560, s)
+        assert np.min(np.abs(m)) < 1e-9
+        assert np.linalg.svd(jacobian(PUMA560, s), compute_uv=False)[-1] < 1e-9
+    # Away from every region the Jacobian is comfortably full rank.
+    if singular_region(PUMA560, q) is None:
+        assert np.linalg.svd(jacobian(PUMA560, q), compute_uv=False)[-1] > 1e-4
