@@ -177,6 +177,7 @@ class ArmClient:
         self._closed = trio.Event()
         self._failure: Exception | None = None
         self._ending = False
+        self._granted_now = False
         self._subscribers: set[trio.MemorySendChannel[Feedback]] = set()
         self.parameters: SessionParameters | None = None
         self.latest_telemetry: Feedback | None = None
@@ -240,6 +241,10 @@ class ArmClient:
             with trio.move_on_after(5.0):
                 await pump.wait_done()
 
+    def _closing(self) -> bool:
+        # A method, not the attribute: it changes across awaits.
+        return self._ending
+
     def _close_now(self, reason: CloseReason, message: str) -> None:
         self._ending = True
         if self._pump is not None:
@@ -258,17 +263,35 @@ class ArmClient:
             self._failure.__cause__ = exc
             self._closed.set()
             return
+        # Reconnection attempts used in the current outage (reset by a grant): a
+        # stream that opens but never gets a grant uses one just like a stream
+        # that cannot be opened, so an arm that never answers is given up on.
+        used = 0
         try:
             while True:
+                self._granted_now = False
                 ended = await self._run_session(stream)
-                granted_once = granted_once or self.parameters is not None
+                granted_once = granted_once or self._granted_now
+                if self._granted_now:
+                    used = 0
                 if not granted_once or self._ending or ended.reason in _FINAL_REASONS:
                     if self._failure is None and not granted_once:
                         self._failure = SessionClosed(f"no session: {ended.message}", ended.reason)
                     break
-                next_stream = await self._reconnect()
+                next_stream: trio.abc.Stream | None = None
+                while next_stream is None and used < self._reconnect_attempts:
+                    await trio.sleep(self._reconnect_delay * 2**used)
+                    used += 1
+                    try:
+                        next_stream = await self._factory()
+                    except (OSError, trio.BrokenResourceError) as exc:
+                        log.info("reconnect attempt %d failed: %s", used, exc)
                 if next_stream is None:
                     break
+                if self._closing():  # closed while we were reconnecting
+                    await trio.aclose_forcefully(next_stream)
+                    break
+                self.reconnects += 1
                 stream = next_stream
         finally:
             self._closed.set()
@@ -295,20 +318,6 @@ class ArmClient:
         await pump.run()
         self._ready = trio.Event()
         return ended[0] if ended else SessionEnded(CloseReason.PEER_EOF, "stream ended", True)
-
-    async def _reconnect(self) -> trio.abc.Stream | None:
-        delay = self._reconnect_delay
-        for attempt in range(1, self._reconnect_attempts + 1):
-            await trio.sleep(delay)
-            delay *= 2
-            try:
-                stream = await self._factory()
-            except (OSError, trio.BrokenResourceError) as exc:
-                log.info("reconnect attempt %d failed: %s", attempt, exc)
-                continue
-            self.reconnects += 1
-            return stream
-        return None
 
     # --- events -----------------------------------------------------------------
 
@@ -340,6 +349,7 @@ class ArmClient:
             log.info("dropped a packet from the arm: %s", event.message)
 
     def _granted(self, event: Granted) -> None:
+        self._granted_now = True
         self.parameters = event.parameters
         pump, conn = self._pump, self._conn
         assert pump is not None

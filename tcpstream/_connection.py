@@ -123,6 +123,8 @@ class _Connection:
         self._events: deque[Event] = deque()
         self._params: SessionParameters | None = None
         self.role: Role | None = None
+        self.close_reason: CloseReason | None = None
+        """Why the session ended (None while it has not)."""
         self._last_in = now
         self._last_out = now
         self._counter_in = 0
@@ -252,6 +254,7 @@ class _Connection:
         if self._state is not SessionState.IDLE:
             self._send(Packet(PacketKind.BYE, status=reason, body=pack_text(message)), now)
         self._move(Trigger.BYE)
+        self.close_reason = reason
 
     # --- shared machinery -----------------------------------------------------
 
@@ -279,6 +282,7 @@ class _Connection:
                 self._move(Trigger.BYE_IN if by_peer else Trigger.FAULT)
             except IllegalTransition:  # a BYE before our HELLO: still over
                 self._move(Trigger.FAULT)
+            self.close_reason = reason
         self._events.append(SessionEnded(reason, message, by_peer))
 
     def _resync(self) -> None:

@@ -34,6 +34,15 @@ is skipped while output is pending), and the queue holds 32 commands, so an
 honest peer never gets near 256 packets; past it the peer is not reading and
 the connection is given up rather than letting memory grow."""
 
+_NO_LINGER = frozenset(
+    {
+        CloseReason.SILENCE,
+        CloseReason.HANDSHAKE_TIMEOUT,
+        CloseReason.GARBAGE,
+        CloseReason.PEER_EOF,
+    }
+)
+
 CLOSE_TIMEOUT = 5.0
 """Seconds to let the final BYE drain before the stream is closed regardless."""
 
@@ -108,9 +117,12 @@ class Pump:
         params = self.conn.parameters
         linger = max(CLOSE_TIMEOUT, params.dead_time if params is not None else 0.0)
         errors = (trio.BrokenResourceError, trio.ClosedResourceError, OSError)
+        # Lingering is for a peer that is alive and closing too; one that fell
+        # silent, never finished the handshake or sent garbage gets no grace.
+        lingers = self.conn.close_reason not in _NO_LINGER
         with trio.move_on_after(linger) as scope:
             scope.shield = True
-            if isinstance(self.stream, trio.abc.HalfCloseableStream):
+            if lingers and isinstance(self.stream, trio.abc.HalfCloseableStream):
                 try:
                     await self.stream.send_eof()
                     while await self.stream.receive_some(RECEIVE_CHUNK):

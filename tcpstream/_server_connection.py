@@ -107,6 +107,7 @@ class ServerConnection(_Connection):
     def refuse(self, reason: RefuseReason, message: str, now: float) -> None:
         """Refuse with ``reason`` and a text saying what to do; the connection is CLOSED."""
         self._move(Trigger.REFUSE)
+        self.close_reason = CloseReason.REFUSED
         self._send(
             Packet(PacketKind.REFUSE, status=reason, body=pack_text(message)), now, tagged=False
         )

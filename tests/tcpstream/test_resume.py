@@ -328,3 +328,37 @@ def test_random_disconnects_never_run_a_command_twice(
     # Each command ran exactly once, in request-id order, to completion.
     assert [c.args[1] for c in arm.executed] == durations
     assert [c.args[1] for c in arm.finished] == durations
+
+
+def test_reconnecting_to_an_arm_that_never_answers_gives_up() -> None:
+    arm = FakeArm(move_time=100.0)
+
+    async def main() -> None:
+        async with Server(arm, PATIENT) as server, trio.open_nursery() as nursery:
+            opened: list[trio.abc.Stream] = []
+            silent_ends: list[trio.abc.Stream] = []
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                if not opened:
+                    nursery.start_soon(server.serve_stream, server_end)
+                else:
+                    silent_ends.append(server_end)  # connected, never answered
+                opened.append(client_end)
+                return client_end
+
+            async with ArmClient(
+                factory, reconnect_attempts=2, reconnect_delay=0.5, handshake_timeout=3.0
+            ) as c:
+                handle = await c.submit(commands.move_joints([1.0] * 6))
+                await handle.accepted()
+                await trio.aclose_forcefully(opened[0])
+                t0 = trio.current_time()
+                with pytest.raises(SessionClosed):
+                    await handle.completed()
+                # Two reconnections, each waiting out its handshake, then no more.
+                assert len(opened) == 3
+                assert trio.current_time() - t0 == pytest.approx(0.5 + 3.0 + 1.0 + 3.0, abs=0.01)
+            nursery.cancel_scope.cancel()
+
+    run(main)
