@@ -32,7 +32,7 @@ import math
 import struct
 from dataclasses import dataclass, field
 
-from ._commands import ARGUMENT_WORDS, AUX_WORDS, CommandCode, FailureReason
+from ._commands import ARGUMENT_WORDS, AUX_WORDS, CommandCode, CommandFlags, FailureReason
 
 __all__ = [
     "BODY_SIZE",
@@ -72,6 +72,7 @@ SIGNED_SIZE = _HEADER.size + BODY_SIZE  # 200: the bytes the tag covers
 PACKET_SIZE = SIGNED_SIZE + TAG_SIZE  # 216
 
 _CODES = frozenset(int(c) for c in CommandCode)
+_KNOWN_FLAGS = sum(int(f) for f in CommandFlags)
 _ZERO_AUX = (0.0,) * AUX_WORDS
 _ZERO_BODY = bytes(BODY_SIZE)
 _ZERO_TAG = bytes(TAG_SIZE)
@@ -265,8 +266,8 @@ def decode_packet(data: bytes) -> Packet:
 
     Checked, in order: size, magic, version, kind, reserved field, finite aux
     words (every kind), finite body words (numeric kinds), and for COMMAND a
-    known command code.  Authentication (tag) and sequencing (counter) are the
-    session's business, not the codec's.
+    known command code and no unknown flag bits.  Authentication (tag) and
+    sequencing (counter) are the session's business, not the codec's.
     """
     if len(data) != PACKET_SIZE:
         raise WrongSize(f"packet is {len(data)} bytes, expected {PACKET_SIZE}")
@@ -291,8 +292,13 @@ def decode_packet(data: bytes) -> Packet:
         for i, word in enumerate(_WORDS.unpack(body)):
             if not math.isfinite(word):
                 raise NonFiniteWord(f"body word {i} is {word!r}", request_id=request_id)
-    if pkind is PacketKind.COMMAND and code not in CommandCode._value2member_map_:
-        raise UnknownCommand(f"unknown command code {code}", request_id=request_id)
+    if pkind is PacketKind.COMMAND:
+        if code not in _CODES:
+            raise UnknownCommand(f"unknown command code {code}", request_id=request_id)
+        if flags & ~_KNOWN_FLAGS:
+            raise BadField(
+                f"unknown command flag bits {flags & ~_KNOWN_FLAGS:#06x}", request_id=request_id
+            )
     return Packet(
         kind=pkind,
         flags=flags,
