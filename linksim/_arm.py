@@ -52,6 +52,7 @@ from ._kinematics import (
     frame_from_psa,
     hand_frame,
     inverse,
+    inverse_candidates,
     psa,
     rotation_about,
     singular_region,
@@ -492,6 +493,18 @@ class SimulatedArm:
         vias = np.array(command.args[2 : 2 + 3 * n]).reshape(n, 3)
         rotation = self._frame[:3, :3].copy()
         start_q = self._q.copy()
+        # The via points themselves first: "out of reach" is the root cause
+        # an operator needs, not the joint that first strains on the way there.
+        frame = np.eye(4)
+        frame[:3, :3] = rotation
+        for i, via in enumerate(vias, start=1):
+            frame[:3, 3] = via
+            try:
+                inverse_candidates(self._model, frame, start_q)
+            except CommandFailed as exc:
+                raise _command_failed(
+                    exc.reason, f"via point {i}: {exc.message}", exc.aux
+                ) from None
         keep = None if singular_region(self._model, start_q) else branch(self._model, start_q)
         vmax = np.asarray(self._model.max_velocity) * self._speed
         speed = self._config.cartesian_speed * self._speed

@@ -455,3 +455,16 @@ def test_any_reachable_pose_is_reached_exactly_in_the_planned_time(q: tuple[floa
         assert trio.current_time() == pytest.approx(math.ceil(slowest * 125 - 1e-9) / 125)
 
     run(main)
+
+
+def test_path_to_an_unreachable_via_point_names_the_point() -> None:
+    async def main() -> None:
+        arm = SimulatedArm(EMPTY)
+        path = (2.0, 0.0, 0.5, 0.0, 0.0, 1.5, 0.0, -0.3)
+        err = await refused(arm, Command(CommandCode.MOVE_PATH, path))
+        assert err.reason is FailureReason.UNREACHABLE
+        assert err.message.startswith("via point 2: the hand pose is out of reach")
+        assert err.aux[0] == pytest.approx(float(np.linalg.norm([1.5, 0.0, -0.1])))
+        np.testing.assert_array_equal(arm.joints, HOME)
+
+    run(main)
