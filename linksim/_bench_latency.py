@@ -103,20 +103,23 @@ def _summary(samples: list[float]) -> dict[str, float]:
     }
 
 
-async def _measure(count: int, warmup: int, block: int) -> dict[str, Any]:
+async def _measure(count: int, warmup: int, block: int, key: bytes | None) -> dict[str, Any]:
     command_rtt: list[float] = []
     echo_rtt: list[float] = []
     packet = bytes(PACKET_SIZE)
     clock = time.perf_counter
     async with trio.open_nursery() as nursery:
         arm_listeners = await nursery.start(
-            partial(serve_tcp, InstantArm(), 0, host="127.0.0.1", telemetry_every=0)
+            partial(serve_tcp, InstantArm(), 0, host="127.0.0.1", telemetry_every=0, key=key)
         )
         echo_listeners = await nursery.start(
             partial(trio.serve_tcp, _echo_handler, 0, host="127.0.0.1")
         )
         echo = await trio.open_tcp_stream("127.0.0.1", _port(echo_listeners))
-        async with echo, connect_tcp("127.0.0.1", _port(arm_listeners), identity="bench") as arm:
+        async with (
+            echo,
+            connect_tcp("127.0.0.1", _port(arm_listeners), identity="bench", key=key) as arm,
+        ):
             for _ in range(warmup):
                 await arm.status()
                 await _echo_once(echo, packet)
@@ -138,6 +141,7 @@ async def _measure(count: int, warmup: int, block: int) -> dict[str, Any]:
     return {
         "benchmark": "latency",
         "count": count,
+        "authenticated": key is not None,
         "packet_bytes": PACKET_SIZE,
         "command": cmd,
         "raw_echo": raw,
@@ -147,11 +151,20 @@ async def _measure(count: int, warmup: int, block: int) -> dict[str, Any]:
     }
 
 
-def run(count: int = 2000, warmup: int = 200, block: int = 100) -> dict[str, Any]:
-    """Measure ``count`` command round trips and ``count`` raw echoes; the report as a dict."""
+_BENCH_KEY = b"latency-benchmark-key-0123456789"
+
+
+def run(
+    count: int = 2000, warmup: int = 200, block: int = 100, *, authenticated: bool = False
+) -> dict[str, Any]:
+    """Measure ``count`` command round trips and ``count`` raw echoes; the report as a dict.
+
+    ``authenticated``: with a pre-shared key (HMAC on every packet), else without.
+    """
     if count < 1 or warmup < 0 or block < 1:
         raise ValueError("count >= 1, warmup >= 0, block >= 1")
-    result: dict[str, Any] = trio.run(_measure, count, warmup, block)
+    key = _BENCH_KEY if authenticated else None
+    result: dict[str, Any] = trio.run(_measure, count, warmup, block, key)
     return result
 
 
@@ -159,19 +172,22 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench latency``."""
     ap.add_argument("--count", type=int, default=2000, help="round trips of each kind")
     ap.add_argument("--warmup", type=int, default=200, help="untimed round trips first")
+    ap.add_argument("--key", action="store_true", help="authenticate (HMAC tag on every packet)")
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
 
 def main(args: argparse.Namespace) -> int:
     """Run the benchmark and print the report (text, or JSON with ``--json``)."""
-    report = run(args.count, args.warmup)
+    report = run(args.count, args.warmup, authenticated=args.key)
     if args.json:
         json.dump(report, sys.stdout)
         sys.stdout.write("\n")
         return 0
     cmd, raw = report["command"], report["raw_echo"]
+    auth = "with HMAC tags" if report["authenticated"] else "no key"
     print(
-        f"command -> completed over loopback TCP ({report['count']} round trips, 216-byte packets)"
+        f"command -> completed over loopback TCP ({report['count']} round trips, "
+        f"216-byte packets, {auth})"
     )
     print(f"  tcpstream STATUS : p50 {cmd['p50_us']:8.1f} us   p99 {cmd['p99_us']:8.1f} us")
     print(f"  raw TCP echo     : p50 {raw['p50_us']:8.1f} us   p99 {raw['p99_us']:8.1f} us")

@@ -27,6 +27,7 @@ def test_bench_latency_json() -> None:
     assert report["benchmark"] == "latency"
     assert report["count"] == 40
     assert report["packet_bytes"] == 216
+    assert report["authenticated"] is False
     for side in ("command", "raw_echo"):
         figures = report[side]
         assert 0 < figures["min_us"] <= figures["p50_us"] <= figures["p99_us"]
