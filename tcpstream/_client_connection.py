@@ -204,11 +204,13 @@ class ClientConnection(_Connection):
         kind, rid = packet.kind, packet.request_id
         aux = (packet.aux[0], packet.aux[1], packet.aux[2], packet.aux[3])
         if kind is PacketKind.FAILED:
+            text = unpack_text(packet.body)
             try:
                 reason = FailureReason(packet.status)
-            except ValueError:
+            except ValueError:  # a newer arm's reason: keep its number in the text
                 reason = FailureReason.ARM_FAULT
-            self._events.append(Failed(rid, packet.code, reason, unpack_text(packet.body), aux))
+                text = f"(reason code {packet.status}) {text}"
+            self._events.append(Failed(rid, packet.code, reason, text, aux))
             return
         if kind is PacketKind.TELEMETRY:
             try:
@@ -218,19 +220,23 @@ class ClientConnection(_Connection):
                 return
             self._events.append(TelemetryReceived(int(aux[0]), feedback))
             return
+        if kind is PacketKind.ACCEPTED:
+            try:
+                self._events.append(Accepted(rid, CommandCode(packet.code), int(aux[0])))
+            except ValueError:  # counted; the COMPLETED or FAILED still settles it
+                self._reject(
+                    FailureReason.BAD_PACKET, f"ACCEPTED names code {packet.code}", rid, now
+                )
+            return
         try:
             code = CommandCode(packet.code)
-        except ValueError:
-            self._reject(
-                FailureReason.BAD_PACKET, f"reply for unknown command {packet.code}", rid, now
-            )
-            return
-        if kind is PacketKind.ACCEPTED:
-            self._events.append(Accepted(rid, code, int(aux[0])))
-            return
-        try:
             feedback = Feedback.from_words(packet.words())
         except ValueError as exc:
-            self._reject(FailureReason.BAD_PACKET, f"bad feedback array: {exc}", rid, now)
+            # Count it like any bad packet, and settle the command it answers:
+            # left pending, its caller would hang until the session ended.
+            why = f"the arm's COMPLETED could not be decoded ({exc}); check the arm with STATUS"
+            self._reject(FailureReason.BAD_PACKET, why, rid, now)
+            if rid:
+                self._events.append(Failed(rid, packet.code, FailureReason.BAD_PACKET, why, aux))
             return
         self._events.append(Completed(rid, code, CommandResult(feedback, aux)))

@@ -17,6 +17,7 @@ from tcpstream import (
     ControllerIdentity,
     ControlRequested,
     Event,
+    Failed,
     FailureReason,
     Feedback,
     Granted,
@@ -34,6 +35,7 @@ from tcpstream import (
     decode_packet,
     encode_packet,
 )
+from tcpstream._packet import words_body
 
 from .harness import KEY
 
@@ -417,3 +419,29 @@ def test_request_id_zero_is_rejected() -> None:
         FailureReason.BAD_PACKET,
         0,
     )
+
+
+def test_an_undecodable_completed_settles_its_command() -> None:
+    pair = Pair(server_key=None, client_key=None).open()
+    pair.client.send_command(3, commands.status(), 0.0)
+    pair.flush()
+    words = [0.0] * 18
+    words[17] = 99.0  # an error indicator this client does not know
+    bad = Packet(PacketKind.COMPLETED, code=2, request_id=3, counter=2, body=words_body(words))
+    pair.client.receive_data(encode_packet(bad), 0.0)
+    events = drain(pair.client)
+    failed = [e for e in events if isinstance(e, Failed)]
+    assert [(f.request_id, f.reason) for f in failed] == [(3, FailureReason.BAD_PACKET)]
+    assert "check the arm with STATUS" in failed[0].message
+    assert pair.client.statistics().bad_packets == 1
+
+
+def test_an_unknown_failure_reason_keeps_its_number() -> None:
+    pair = Pair(server_key=None, client_key=None).open()
+    pair.client.send_command(4, commands.status(), 0.0)
+    pair.flush()
+    reply = Packet(PacketKind.FAILED, code=2, status=200, request_id=4, counter=2)
+    pair.client.receive_data(encode_packet(reply), 0.0)
+    failed = [e for e in drain(pair.client) if isinstance(e, Failed)]
+    assert failed[0].reason is FailureReason.ARM_FAULT
+    assert failed[0].message.startswith("(reason code 200)")
