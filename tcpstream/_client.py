@@ -48,6 +48,7 @@ from ._events import (
     Granted,
     PacketRejected,
     RefusalReceived,
+    RefuseReason,
     Role,
     SessionEnded,
     SessionParameters,
@@ -340,7 +341,13 @@ class ArmClient:
         elif isinstance(event, Granted):
             self._granted(event)
         elif isinstance(event, RefusalReceived):
-            self._failure = Refused(event.reason, event.message)
+            if event.reason is RefuseReason.NOT_AUTHORIZED:
+                self._failure = AuthenticationFailed(
+                    f"the arm refused our key ({event.message}); "
+                    "check that both ends have the same pre-shared key"
+                )
+            else:
+                self._failure = Refused(event.reason, event.message)
         elif isinstance(event, SessionEnded):
             ended.append(event)
             if event.reason is CloseReason.AUTHENTICATION and not event.by_peer:

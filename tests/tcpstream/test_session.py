@@ -6,6 +6,7 @@ import pytest
 import trio
 
 from tcpstream import (
+    AuthenticationFailed,
     Command,
     CommandCode,
     CommandFailed,
@@ -21,7 +22,7 @@ from tcpstream import (
 )
 
 from .fakearm import FakeArm
-from .harness import run, wired
+from .harness import KEY, run, wired
 
 
 def test_commands_round_trip_with_feedback_and_aux() -> None:
@@ -247,3 +248,28 @@ def test_commands_after_terminate_are_refused_and_the_queue_before_it_drains() -
 
     run(main)
     assert [c.code for c in arm.executed] == [CommandCode.MOVE_JOINT]
+
+
+@pytest.mark.parametrize(
+    ("arm_key", "client_key", "words"),
+    [
+        pytest.param(KEY, b"another-key-of-16+bytes", "same pre-shared key", id="wrong-key"),
+        pytest.param(KEY, None, "requires a pre-shared key", id="no-client-key"),
+        pytest.param(None, KEY, "without authenticating", id="no-arm-key"),
+    ],
+)
+def test_key_mismatches_raise_authentication_failed(
+    arm_key: bytes | None, client_key: bytes | None, words: str
+) -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        async with wired(arm, ServerConfig(key=arm_key)) as w:
+            with pytest.raises(AuthenticationFailed, match=words):
+                async with w.client(key=client_key):
+                    pass
+            async with w.client(key=arm_key) as c:  # the right key still works after
+                await c.status()
+
+    run(main)
+    assert [c.code for c in arm.executed] == [CommandCode.STATUS]
