@@ -95,6 +95,12 @@ def test_output_file_and_text_table(tmp_path: Path) -> None:
     assert [r["one_way_delay_s"] for r in rows] == [0.0]
     assert rows[0]["window"] == BASE.window
     assert rows[0]["default_window"]
+    # The summary tables come from the saved rows: this one is a target row.
+    summary = _bench("--from-json", str(out), "--summary").stdout.decode()
+    assert "#### Targets" in summary
+    ratio = rows[0]["ratio_to_limit"]
+    verdict = "pass" if ratio >= 0.9 else "**miss**"
+    assert f"| 9600 | 0 | 0.0001 | {ratio:.3f} {verdict} | - | - |" in summary
 
 
 def test_plot_writes_png(tmp_path: Path) -> None:
