@@ -119,10 +119,17 @@ class Server:
     """
 
     def __init__(self, executor: Executor, config: ServerConfig | None = None) -> None:
+        if not isinstance(executor, Executor):
+            raise TypeError(
+                "the executor must implement tcpstream.Executor "
+                "(control_rate_hz, async execute, halt, state)"
+            )
         self.executor = executor
         self.config = config or ServerConfig()
         hb, dead = self.config.timing()
         rate = executor.control_rate_hz
+        if not rate > 0:
+            raise ValueError(f"the executor's control_rate_hz must be > 0, got {rate!r}")
         period = self.config.telemetry_every / rate if self.config.telemetry_every else 0.0
         self.parameters = SessionParameters(hb, dead, period, self.config.memory_size)
         self.memory = RequestMemory(self.config.memory_size, self.config.memory_identities)

@@ -17,6 +17,7 @@ from tcpstream import (
     Refused,
     RefuseReason,
     Role,
+    Server,
     ServerConfig,
     commands,
 )
@@ -273,3 +274,11 @@ def test_key_mismatches_raise_authentication_failed(
 
     run(main)
     assert [c.code for c in arm.executed] == [CommandCode.STATUS]
+
+
+def test_server_refuses_what_is_not_an_executor() -> None:
+    with pytest.raises(TypeError, match=r"tcpstream\.Executor"):
+        Server(object())  # type: ignore[arg-type]
+    arm = FakeArm(control_rate_hz=0.0)
+    with pytest.raises(ValueError, match="control_rate_hz"):
+        Server(arm)
