@@ -38,7 +38,7 @@ async def serve_tcp(
     ``options`` are :class:`ServerConfig` fields (``key=``, ``rtt_hint=`` ...).
     ``task_status.started`` receives the listeners (port 0 picks a free port).
     """
-    cfg = config or ServerConfig(**options)
+    cfg = _config(config, options)
     listeners: list[trio.abc.Listener[Any]]
     if ssl_context is not None:
         listeners = list(await trio.open_ssl_over_tcp_listeners(port, ssl_context, host=host))
@@ -62,9 +62,14 @@ async def serve_stream(
     sessions across streams, keep one :class:`Server` and call its
     :meth:`Server.serve_stream` for each.
     """
-    cfg = config or ServerConfig(**options)
-    async with Server(executor, cfg) as server:
+    async with Server(executor, _config(config, options)) as server:
         await server.serve_stream(stream)
+
+
+def _config(config: ServerConfig | None, options: dict[str, Any]) -> ServerConfig:
+    if config is not None and options:
+        raise TypeError(f"give either config= or ServerConfig fields, not both: {sorted(options)}")
+    return config if config is not None else ServerConfig(**options)
 
 
 def connect_tcp(
