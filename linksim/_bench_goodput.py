@@ -282,7 +282,8 @@ def _print_table(rows: Sequence[dict[str, Any]]) -> None:
         errors = "burst" if r["burst"] else f"{r['byte_error_rate']:g}"
         length = f"{r['max_packet_len']}{'a' if r['length_policy'] == 'auto' else ''}"
         window = f"{r['window']}{'*' if r['default_window'] else ''}"
-        flag = "" if r["ok"] and r["complete"] else ("  INCOMPLETE" if r["ok"] else "  MISMATCH")
+        flag = "" if r["complete"] else f"  {r.get('end', 'incomplete').upper()}"
+        flag += "" if r["ok"] else "  DATA MISMATCH"
         print(
             f"{r['baud']:>5} {r['one_way_delay_s']:>5g} {errors:>7} {window:>3} {length:>5} "
             f"{r['payload']:>8} {r['profile']:>9} {r['payload_bytes']:>7} {r['seconds']:>8.1f} "

@@ -489,6 +489,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         "smoothed_rtt_s": None if m.smoothed_rtt is None else round(m.smoothed_rtt, 4),
         "effective_window": m.effective_window,
         "complete": m.complete,
+        "end": m.end,
         "ok": m.ok,
         "seed": point.seed,
         "sweeps": list(sweeps),

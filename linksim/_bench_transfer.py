@@ -84,6 +84,9 @@ class Measurement:
             not complete within its time cap, to the cap.
         connect_seconds: virtual seconds of the connection handshake.
         complete: every payload byte arrived before the time cap.
+        end: how the run ended: ``complete``, ``time cap``, ``link dead``
+            (an endpoint's dead-link verdict), ``aborted`` or ``stalled``
+            (no timer and nothing on the line: a protocol deadlock).
         ok: what arrived is exactly the start of the payload (nothing
             duplicated, reordered or damaged).
         retransmissions, timeouts, naks, fast_retransmits: sender counters.
@@ -96,6 +99,7 @@ class Measurement:
     seconds: float
     connect_seconds: float
     complete: bool
+    end: str
     ok: bool
     retransmissions: int
     timeouts: int
@@ -188,9 +192,10 @@ def simulate(
 
     Both ends use the configuration a user of this line would write: the
     line's one-way delay and rate (which size every timer and the pacing),
-    the window, the maximum packet length and the encoding profile.
-    ``dead_after`` is made effectively infinite so that a bad point shows up
-    as low goodput, not as an aborted run.
+    the window, the maximum packet length and the encoding profile; every
+    other setting (timers, keepalive, ``dead_after``, buffers) is the
+    default, so the figures are what a user gets.  A dead-link verdict or an
+    abort ends the run early, reported in ``end``.
 
     Args:
         time_cap: stop after this many virtual seconds of data transfer and
@@ -213,7 +218,6 @@ def simulate(
         window=window,
         max_packet_length=max_len,
         encoding=encoding,
-        dead_after=1e9,
     )
     size = len(payload)
     a, b = Endpoint(cfg), Endpoint(cfg)
@@ -231,6 +235,7 @@ def simulate(
     # character times to any reaction, as a real tty read would.
     quantum = 16 * BITS_PER_CHAR / rate
     cap_at = math.inf
+    end = "complete"
     while len(got) < size:
         if start is None and a.state is State.ESTABLISHED:
             start = now
@@ -244,12 +249,14 @@ def simulate(
         ]
         arrivals = [t for t in (ab.next_delivery(), ba.next_delivery()) if t is not None]
         if not (timers or arrivals):
+            end = "stalled"
             break
         wake = min(timers, default=math.inf)
         if arrivals:
             wake = min(wake, min(arrivals) + quantum)
         if wake > cap_at or (start is None and wake > time_cap):
             now = min(max(now, wake), cap_at)
+            end = "time cap"
             break
         now = max(now, wake)
         b.receive_data(ab.receive(now), now)
@@ -259,7 +266,12 @@ def simulate(
             if t is not None and t <= now:
                 ep.handle_timer(now)
         got += b.read(None, now)
-        if any(isinstance(e, ConnectionAborted | LinkDead) for ep in (a, b) for e in ep.events()):
+        events = [e for ep in (a, b) for e in ep.events()]
+        if any(isinstance(e, LinkDead) for e in events):
+            end = "link dead"
+            break
+        if any(isinstance(e, ConnectionAborted) for e in events):
+            end = "aborted"
             break
     connect_seconds = start if start is not None else now
     s = a.statistics()
@@ -268,6 +280,7 @@ def simulate(
         seconds=now - connect_seconds,
         connect_seconds=connect_seconds,
         complete=len(got) == size,
+        end="complete" if len(got) == size else end,
         ok=bytes(got) == payload[: len(got)],
         retransmissions=s.retransmissions,
         timeouts=s.timeouts,
