@@ -179,6 +179,10 @@ class ArmClient:
         self._failure: Exception | None = None
         self._ending = False
         self._granted_now = False
+        self._arm_instance: int | None = None
+        # The highest request id the arm has confirmed taking in (ACCEPTED or
+        # COMPLETED): a GRANT reporting less means the arm's memory was lost.
+        self._confirmed_highest = 0
         self._subscribers: set[trio.MemorySendChannel[Feedback]] = set()
         self.parameters: SessionParameters | None = None
         self.latest_telemetry: Feedback | None = None
@@ -324,8 +328,10 @@ class ArmClient:
 
     def _on_event(self, event: Event, ended: list[SessionEnded]) -> None:
         if isinstance(event, Completed):
+            self._confirmed_highest = max(self._confirmed_highest, event.request_id)
             self._resolve(event.request_id, event.result, None)
         elif isinstance(event, Accepted):
+            self._confirmed_highest = max(self._confirmed_highest, event.request_id)
             handle = self._pending.get(event.request_id)
             if handle is not None:
                 handle._accept(event.position)
@@ -362,19 +368,25 @@ class ArmClient:
         assert pump is not None
         assert conn is not None
         now = trio.current_time()
-        # Resume: re-send what we have no outcome for, oldest first, same ids.
+        # Resume.  If the arm forgot us -- it restarted (new instance), or no
+        # longer remembers ids it confirmed -- every command we sent without
+        # seeing its outcome may or may not have run there: report that rather
+        # than risk running one twice.  Otherwise re-send them all, oldest first,
+        # under the same ids: the arm answers from memory, attaches to the one
+        # running, or (above its highest id) runs what it never received.
+        forgot = event.last_request_id < self._confirmed_highest or (
+            self._arm_instance is not None and event.arm_instance != self._arm_instance
+        )
+        self._arm_instance = event.arm_instance
+        if forgot:
+            self._confirmed_highest = event.last_request_id
         for rid in sorted(self._pending):
             handle = self._pending[rid]
             if not handle.sent:
                 continue
-            if handle.position is not None and rid > event.last_request_id:
-                # The arm had queued it but no longer remembers it (restarted, or
-                # forgot us): it may have run.  Say so instead of risking a rerun.
-                self._resolve(
-                    rid,
-                    None,
-                    SessionClosed("the arm lost its memory of this command; outcome unknown"),
-                )
+            if forgot:
+                unknown = "the arm restarted or forgot this controller; outcome unknown"
+                self._resolve(rid, None, SessionClosed(unknown))
                 continue
             conn.send_command(rid, handle.command, now)
         pump.kick()

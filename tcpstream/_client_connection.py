@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import secrets
+import struct
 from collections.abc import Callable
 
 from . import _auth
@@ -197,7 +198,8 @@ class ClientConnection(_Connection):
         self._move(Trigger.GRANT_IN)
         self.role = role
         self._params = params
-        self._events.append(Granted(role, params, packet.request_id))
+        (instance,) = struct.unpack_from("!Q", packet.body, _auth.PROOF_SIZE)
+        self._events.append(Granted(role, params, packet.request_id, instance))
 
     def _on_reply(self, packet: Packet, now: float) -> None:
         self._move(Trigger.REPLY_IN)

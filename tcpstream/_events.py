@@ -152,11 +152,17 @@ class EmergencyStopRequested(Event):
 
 @dataclass(frozen=True, slots=True)
 class Granted(Event):
-    """The arm granted ``role``; ``last_request_id`` is the highest id it remembers for us."""
+    """The arm granted ``role``; ``last_request_id`` is the highest id it remembers for us.
+
+    ``arm_instance`` is a random number the arm's server picks when it starts:
+    a different one on a reconnect means the arm restarted and its exactly-once
+    memory is gone.
+    """
 
     role: Role
     parameters: SessionParameters
     last_request_id: int
+    arm_instance: int = 0
 
 
 @dataclass(frozen=True, slots=True)

@@ -100,6 +100,7 @@ class _Link:
             key=cfg.key,
             handshake_timeout=cfg.handshake_time(),
             idle_timeout=cfg.idle_timeout,
+            instance=server.instance,
             now=trio.current_time(),
             nonce_source=cfg.nonce_source,
         )
@@ -133,6 +134,9 @@ class Server:
         period = self.config.telemetry_every / rate if self.config.telemetry_every else 0.0
         self.parameters = SessionParameters(hb, dead, period, self.config.memory_size)
         self.memory = RequestMemory(self.config.memory_size, self.config.memory_identities)
+        self.instance = int.from_bytes(self.config.nonce_source(8), "big")
+        """Random per server object, sent in every GRANT: a controller that sees it
+        change knows the arm restarted and its exactly-once memory is gone."""
         # Bounded by config.queue_size (QUEUE_FULL beyond it).
         self._queue: deque[_Job] = deque()
         self._queue_wake = trio.Event()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import secrets
+import struct
 from collections.abc import Callable
 
 from . import _auth
@@ -42,6 +43,8 @@ from ._state import SessionState, Side, Trigger
 __all__ = ["ServerConnection"]
 
 _ZERO_AUX_4 = (0.0, 0.0, 0.0, 0.0)
+_INSTANCE = struct.Struct("!Q")
+"""GRANT body bytes 32..39: the arm's instance number (after the 32-byte proof)."""
 
 
 class ServerConnection(_Connection):
@@ -61,6 +64,7 @@ class ServerConnection(_Connection):
         key: bytes | None = None,
         handshake_timeout: float = 10.0,
         idle_timeout: float | None = None,
+        instance: int = 0,
         now: float = 0.0,
         nonce_source: Callable[[int], bytes] = secrets.token_bytes,
     ) -> None:
@@ -69,6 +73,7 @@ class ServerConnection(_Connection):
         )
         self._granted_params = parameters
         self._idle_timeout = idle_timeout
+        self._instance = instance
         self._last_activity = now
         # Request ids ACCEPTED and not yet answered: while any is outstanding the
         # controller is waiting, not idle.  Bounded by the arm's queue (+1 running).
@@ -87,7 +92,7 @@ class ServerConnection(_Connection):
         self._last_activity = now
         self._params = self._granted_params
         p = self._params
-        body = bytes(BODY_SIZE)
+        proof = bytes(_auth.PROOF_SIZE)
         if self._key is not None:
             proof = _auth.server_proof(
                 self._key,
@@ -97,7 +102,7 @@ class ServerConnection(_Connection):
                 self._incarnation,
                 self._wanted,
             )
-            body = proof.ljust(BODY_SIZE, b"\0")
+        body = (proof + _INSTANCE.pack(self._instance)).ljust(BODY_SIZE, b"\0")
         aux = (p.heartbeat_interval, p.dead_time, p.telemetry_period, float(p.memory_size))
         self._send(
             Packet(PacketKind.GRANT, flags=role, request_id=last_request_id, aux=aux, body=body),

@@ -362,3 +362,62 @@ def test_reconnecting_to_an_arm_that_never_answers_gives_up() -> None:
             nursery.cancel_scope.cancel()
 
     run(main)
+
+
+class DeafStream(trio.abc.Stream):
+    """Passes writes through; once ``deaf`` is set, hears nothing more (replies lost)."""
+
+    def __init__(self, inner: trio.abc.Stream) -> None:
+        self.inner = inner
+        self.deaf = False
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes | bytearray:
+        data = await self.inner.receive_some(max_bytes)
+        while self.deaf and data:
+            data = await self.inner.receive_some(max_bytes)
+        return data
+
+    async def aclose(self) -> None:
+        await self.inner.aclose()
+
+
+def test_a_restarted_arm_is_detected_even_before_any_reply() -> None:
+    """Sent, taken in by the arm, reply lost, arm restarted: unknown, never re-run."""
+    first_arm, second_arm = FakeArm(move_time=10.0), FakeArm(move_time=10.0)
+
+    async def main() -> None:
+        async with (
+            Server(first_arm, PATIENT) as first,
+            Server(second_arm, PATIENT) as second,
+            trio.open_nursery() as nursery,
+        ):
+            current = [first]
+            streams: list[DeafStream] = []
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(current[0].serve_stream, server_end)
+                streams.append(DeafStream(client_end))
+                return streams[-1]
+
+            async with ArmClient(factory, reconnect_delay=0.5) as c:
+                streams[-1].deaf = True  # the ACCEPTED will never be heard
+                handle = await c.submit(commands.move_joints([1.0] * 6))
+                await trio.sleep(0.1)
+                assert first.statistics().commands_accepted == 1  # the arm took it in
+                assert handle.position is None
+                current[0] = second
+                await trio.aclose_forcefully(streams[-1])
+                with pytest.raises(SessionClosed, match="outcome unknown"):
+                    await handle.completed()
+            nursery.cancel_scope.cancel()
+
+    run(main)
+    assert first_arm.count(CommandCode.MOVE_JOINTS) == 1
+    assert second_arm.executed == []
