@@ -30,6 +30,7 @@ itself failed or reached EOF).
 from __future__ import annotations
 
 import logging
+import math
 import operator
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from contextlib import asynccontextmanager, contextmanager
@@ -142,14 +143,27 @@ class _Driver:
         self._cancel = trio.CancelScope()
         self._stopped = trio.Event()
         self._writer_idle = True
+        self._flushing = 0  # flush() calls waiting for the writer to go idle
+        self._timer_scope: trio.CancelScope | None = None  # the timer task's sleep
         self.reads = self.writes = self.bytes_in = self.bytes_out = 0
 
     # -- change notification ----------------------------------------------------
 
     def notify(self) -> None:
-        """Wake every waiter; each re-checks its own condition."""
+        """Wake every waiter; each re-checks its own condition.
+
+        The timer task is not among them: it sleeps until the endpoint's
+        deadline, and is only woken (its sleep's deadline moved) when a
+        change brought that deadline earlier.  Waking it on every change
+        cost a task switch per packet for nothing.
+        """
         self._changed.set()
         self._changed = trio.Event()
+        scope = self._timer_scope
+        if scope is not None:
+            deadline = self.ep.get_timer()
+            if deadline is not None and deadline < scope.deadline:
+                scope.deadline = deadline
 
     async def changed(self) -> None:
         """Wait for the next :meth:`notify`."""
@@ -221,7 +235,8 @@ class _Driver:
                 self.bytes_out += len(data)
                 continue
             self._writer_idle = True
-            self.notify()
+            if self._flushing:
+                self.notify()
             wake = self.ep.get_send_timer()
             changed = self._changed
             if wake is None:
@@ -235,17 +250,21 @@ class _Driver:
     async def _timer(self) -> None:
         while True:
             deadline = self.ep.get_timer()
-            changed = self._changed
             now = self.now()
-            if deadline is None:
-                await changed.wait()
-            elif deadline > now:
-                with trio.move_on_at(deadline):
-                    await changed.wait()
-            else:
+            if deadline is not None and deadline <= now:
                 self.ep.handle_timer(now)
                 self.after_input()
                 await trio.lowlevel.checkpoint()
+                continue
+            # Sleep until the deadline; notify() moves it earlier when needed.
+            # A deadline that moved later just wakes this loop early: it
+            # re-reads the timer and sleeps again.
+            with trio.CancelScope(deadline=math.inf if deadline is None else deadline) as scope:
+                self._timer_scope = scope
+                try:
+                    await trio.sleep_forever()
+                finally:
+                    self._timer_scope = None
 
     # -- teardown -----------------------------------------------------------------
 
@@ -253,11 +272,17 @@ class _Driver:
         """Give the writer a bounded moment to push out what is pending (shielded)."""
         with trio.CancelScope(shield=True):
             pending = self.ep.statistics().line_backlog
-            with trio.move_on_after(_FLUSH_GRACE + pending):
-                self.notify()
-                await trio.lowlevel.checkpoint()
-                while not self._writer_idle and self.broken is None and not self._stopped.is_set():
-                    await self.changed()
+            self._flushing += 1
+            try:
+                with trio.move_on_after(_FLUSH_GRACE + pending):
+                    self.notify()
+                    await trio.lowlevel.checkpoint()
+                    while (
+                        not self._writer_idle and self.broken is None and not self._stopped.is_set()
+                    ):
+                        await self.changed()
+            finally:
+                self._flushing -= 1
 
     async def stop(self) -> None:
         """Stop the tasks and close the port if it is ours (prompt; shielded)."""
