@@ -16,6 +16,7 @@ from serialsocket import (
     ModemTimeout,
     NoAnswer,
     NoCarrier,
+    NoDialtone,
     answer,
     dial,
     hangup,
@@ -167,5 +168,93 @@ def test_answer_times_out_without_a_call() -> None:
     async def body(line: ModemLine) -> None:
         with pytest.raises(ModemTimeout, match="no call within 30"):
             await answer(line.ends[1], timeout=30)
+
+    run_with_line(body)
+
+
+class ScriptedModem(trio.abc.Stream):
+    """A modem that answers each command line with the next scripted reply."""
+
+    def __init__(self, replies: list[bytes]) -> None:
+        self.replies = replies
+        self.out = bytearray()
+        self.commands: list[bytes] = []
+        self.line = bytearray()
+        self.ready = trio.Event()
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await trio.lowlevel.checkpoint()
+        for byte in bytes(data):
+            if byte == 13:
+                self.commands.append(bytes(self.line))
+                self.line.clear()
+                if self.replies:
+                    self.out += self.replies.pop(0)
+                    self.ready.set()
+            else:
+                self.line.append(byte)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await trio.lowlevel.checkpoint()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        while not self.out:
+            self.ready = trio.Event()
+            await self.ready.wait()
+        n = max_bytes or len(self.out)
+        chunk = bytes(self.out[:n])
+        del self.out[:n]
+        await trio.lowlevel.checkpoint()
+        return chunk
+
+    async def aclose(self) -> None:
+        await trio.lowlevel.checkpoint()
+
+
+@pytest.mark.parametrize(
+    ("reply", "error", "message"),
+    [
+        (b"\r\nNO DIALTONE\r\n", NoDialtone, "line cable"),
+        (b"7\r", LineBusy, "busy"),  # numeric result codes (ATV0)
+        (b"8\r", NoAnswer, "did not answer"),
+        (b"3\r", NoCarrier, "no carrier"),
+        (b"4\r", ModemError, "rejected the dial command"),
+    ],
+)
+def test_result_codes_verbose_and_numeric(
+    reply: bytes, error: type[Exception], message: str
+) -> None:
+    async def main() -> None:
+        modem = ScriptedModem([b"0\r", reply])
+        with pytest.raises(error, match=message):
+            await dial(modem, "123")
+        assert modem.commands == [b"ATZ", b"ATDT123"]
+
+    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+def test_numeric_and_bare_connect() -> None:
+    async def main() -> None:
+        assert await dial(ScriptedModem([b"0\r", b"10\r"]), "1") == ModemConnection(
+            2400, "CONNECT 2400"
+        )
+        # A bare CONNECT (an original 300-baud Hayes) has no rate.
+        assert (await dial(ScriptedModem([b"\r\nOK\r\n", b"\r\nCONNECT\r\n"]), "1")).rate is None
+
+    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+def test_hangup_after_the_carrier_is_already_gone() -> None:
+    async def body(line: ModemLine) -> None:
+        caller, callee = line.ends
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(answer, callee)
+            await trio.sleep(1)
+            await dial(caller, "1")
+        await hangup(callee)  # the answering side hangs up first
+        await trio.sleep(5)  # the caller's modem reports NO CARRIER (S10)
+        assert line.pair.state(0) is ModemState.IDLE
+        await hangup(caller)  # nothing to escape from: still acknowledged
+        assert caller.written.endswith(b"+++\rATH\r")
 
     run_with_line(body)
