@@ -1,11 +1,18 @@
 """serialsocket: a socket-like, reliable, sequenced, full-duplex byte stream over a serial line.
 
-Layer 2, packets: Kermit packets with CRC-16/KERMIT block checks, the prefix
-encoding that keeps packets printable, and an incremental parser that survives
-any line noise.  Layer 3, ARQ: :class:`Endpoint`, a connected, reliable,
-sequenced, full-duplex byte stream with selective-repeat windows and timers
-sized for slow, long-delay lines.  Both are sans-I/O: bytes and ``now`` in,
-bytes, events and timer deadlines out; no clocks or sockets inside.
+Layer 1, port I/O: :func:`open_port` opens a serial device, a pty or a
+pyserial URL as a trio stream (8N1, raw); :func:`open_pty_pair` makes a
+connected raw pty pair; :func:`dial`, :func:`answer` and :func:`hangup` drive
+a Hayes modem.  Layer 2, packets: Kermit packets with CRC-16/KERMIT block
+checks, the prefix encoding that keeps packets printable, and an incremental
+parser that survives any line noise.  Layer 3, ARQ: :class:`Endpoint`, a
+connected, reliable, sequenced, full-duplex byte stream with selective-repeat
+windows and timers sized for slow, long-delay lines.  Layers 2 and 3 are
+sans-I/O: bytes and ``now`` in, bytes, events and timer deadlines out.
+
+:class:`SerialSocket` (``connect``, ``accept``, ``listen``, ``serve``) runs
+the endpoint over a port as a trio ``HalfCloseableStream``;
+:class:`BlockingSerialSocket` offers the same to code that is not async.
 """
 
 from ._blocking import BlockingSerialSocket as BlockingSerialSocket
