@@ -456,7 +456,15 @@ class SimulatedArm:
         )
 
     async def _move_cartesian_delta(self, command: Command) -> Aux:
-        """Seed 004: an incremental move; all zero is index mode; singular regions bounce."""
+        """Seed 004: an incremental move; all zero is index mode; singular regions bounce.
+
+        The increment is applied to the hand frame (translation in the base
+        frame, rotation about the base axes through P) and the new frame is
+        solved in closed form, not by seed 004's inverse-Jacobian step: the
+        result is exact, so the "drift ... due to accumulation of
+        differentiation (linearization) error" that seed 004 leaves uncorrected
+        cannot build up over many increments.
+        """
         dp = np.array(command.args[0:3])
         dr = np.array(command.args[3:6])
         if not dp.any() and not dr.any():

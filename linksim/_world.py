@@ -8,7 +8,10 @@ coordinate system"), metres, radians, kilograms, newtons, seconds.
   (xmin, xmax, ymin, ymax, zmin, zmax); more can be added at run time.
 * Objects are cubes of edge ``size`` with a mass; the gripper can hold one.
   A released object falls straight down and comes to rest on the highest
-  obstacle top (or the floor) under its centre.
+  obstacle top (or the floor) under its centre.  Objects are not obstacles:
+  the planner checks the arm's links against the boxes only, so neither an
+  object on the table nor the one in the hand is collision-checked (a bin is
+  modelled, seed-000 style, by its circumscribing box).
 
 Invalid values raise :class:`~linksim.ConfigError` naming the field.  Sans-I/O
 apart from :meth:`WorldConfig.from_toml`, which reads the file it is given.
