@@ -86,3 +86,88 @@ def test_errors_are_reported_with_exit_status() -> None:
     )
     assert bad.returncode == 2
     assert b"window=40: must be 1..31" in bad.stderr
+
+
+def test_dial_and_answer_through_emulated_modems() -> None:
+    # The modems report CONNECT 38400 (the relay's rate): both sides pace to it.
+    relay = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "linksim",
+            "relay",
+            "--json",
+            "--modem",
+            "--rate",
+            "38400",
+            "--delay",
+            "0.002",
+            "--dial-time",
+            "0.1",
+            "--ring-interval",
+            "0.3",
+            "--handshake-time",
+            "0.1",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert relay.stdout is not None
+        paths = json.loads(relay.stdout.readline())
+        upload = bytes(range(256)) * 12
+        server = subprocess.Popen(
+            cli("listen", paths["b"], "--answer"),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        time.sleep(0.5)  # the answering side resets its modem and waits for RING
+        client = subprocess.run(
+            cli("connect", paths["a"], "--dial", "5551234"),
+            input=upload,
+            capture_output=True,
+            timeout=GUARD,
+        )
+        got, server_err = server.communicate(timeout=GUARD)
+        assert client.returncode == 0, client.stderr
+        assert server.returncode == 0, server_err
+        assert got == upload
+        assert b"CONNECT 38400" in client.stderr
+        assert b"CONNECT 38400" in server_err
+    finally:
+        relay.send_signal(signal.SIGTERM)
+        relay.wait(timeout=GUARD)
+
+
+def test_busy_number_is_reported() -> None:
+    relay = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "linksim",
+            "relay",
+            "--json",
+            "--modem",
+            "--busy",
+            "5550000",
+            "--dial-time",
+            "0.1",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert relay.stdout is not None
+        paths = json.loads(relay.stdout.readline())
+        client = subprocess.run(
+            cli("connect", paths["a"], "--dial", "5550000"),
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            timeout=GUARD,
+        )
+        assert client.returncode == 1
+        assert b"5550000 is busy: try again later" in client.stderr
+    finally:
+        relay.send_signal(signal.SIGTERM)
+        relay.wait(timeout=GUARD)
