@@ -112,6 +112,9 @@ class SerialPort(trio.abc.Stream):
         self.name = name
         self.serial = serial_obj
         self._closed = False
+        # trio's contract: one sender and one receiver at a time (the thread
+        # transport would otherwise interleave two writers' chunks).
+        self._sending = self._receiving = False
         self._bytes_in = self._bytes_out = self._reads = self._writes = self._errors = 0
 
     def statistics(self) -> PortStatistics:
@@ -155,11 +158,16 @@ class SerialPort(trio.abc.Stream):
             trio.BrokenResourceError: the device failed (``__cause__`` is the OSError).
             trio.BusyResourceError: another task is already sending.
         """
+        if self._sending:
+            raise trio.BusyResourceError(f"another task is already sending on {self.name}")
         self._check_open()
+        self._sending = True
         try:
             await self._t.send_all(data)
         except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
             raise self._map(exc) from _cause_of(exc)
+        finally:
+            self._sending = False
         self._writes += 1
         self._bytes_out += len(data)
 
@@ -181,11 +189,16 @@ class SerialPort(trio.abc.Stream):
         """
         if max_bytes is not None and max_bytes < 1:
             raise ValueError("max_bytes must be >= 1")
+        if self._receiving:
+            raise trio.BusyResourceError(f"another task is already receiving on {self.name}")
         self._check_open()
+        self._receiving = True
         try:
             data = await self._t.receive_some(max_bytes or _READ_SIZE)
         except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
             raise self._map(exc) from _cause_of(exc)
+        finally:
+            self._receiving = False
         if data:
             self._reads += 1
             self._bytes_in += len(data)

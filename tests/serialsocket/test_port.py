@@ -194,3 +194,16 @@ def test_device_port_waits_for_data_instead_of_reading_eof() -> None:
                 assert await read_exactly(port, 4) == b"late"
 
     run(main)
+
+
+def test_one_receiver_and_one_sender_at_a_time() -> None:
+    async def main() -> None:
+        port = await open_port("loop://")
+        async with port, trio.open_nursery() as nursery:
+            nursery.start_soon(port.receive_some)
+            await trio.sleep(0.05)
+            with pytest.raises(trio.BusyResourceError, match="already receiving"):
+                await port.receive_some()
+            await port.send_all(b"x")  # lets the first receiver finish
+
+    run(main)
