@@ -198,8 +198,12 @@ class BlockingSerialSocket:
             raise trio.ClosedResourceError("this serial socket was closed") from None
 
     def _socket(self) -> SerialSocket:
-        if self._closed or self._sock is None:
+        if self._closed:
             raise trio.ClosedResourceError("this serial socket was closed")
+        if self._sock is None:
+            raise trio.ClosedResourceError(
+                "not connected: make the socket with BlockingSerialSocket.connect() or .accept()"
+            )
         return self._sock
 
     def _timeout(self, timeout: float | None) -> float | None:
