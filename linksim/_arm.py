@@ -44,25 +44,18 @@ from ._collision import first_collision
 from ._config import ConfigError
 from ._kinematics import (
     PUMA560,
-    SINGULAR_THRESHOLDS,
     ArmModel,
     Array,
-    branch,
     check_limits,
     frame_from_psa,
     hand_frame,
-    inverse,
-    inverse_candidates,
     psa,
-    rotation_about,
-    singular_region,
 )
-from ._trajectory import (
-    CHECKPOINTS,
-    checkpoint_samples,
-    integrate_path,
-    plan_joint_move,
-    plan_path,
+from ._planner import (
+    plan_cartesian_path,
+    plan_move,
+    solve_increment,
+    solve_pose,
 )
 from ._world import DEFAULT_WORLD, World, WorldConfig
 
@@ -72,14 +65,6 @@ logger = logging.getLogger(__name__)
 
 Aux = tuple[float, float, float, float]
 NO_AUX: Aux = (0.0, 0.0, 0.0, 0.0)
-
-MAX_PATH_SECONDS = 300.0
-"""Longest Level-2 path planned in one command: the whole path is solved
-(inverse kinematics per sample) before it moves, so its length bounds memory
-and planning time (300 s = 37 500 samples at 125 Hz)."""
-
-PATH_RETIMES = 3
-"""How often a path is slowed down when a joint would exceed its allowed velocity."""
 
 SQUEEZE_TIME = 0.2
 """Seconds for the gripper to build up a commanded squeeze force."""
@@ -348,50 +333,13 @@ class SimulatedArm:
             )
 
     async def _move_to(self, goal: Array) -> None:
-        """Seed 000's joint move to ``goal``: limits, twenty-point collision check, play."""
-        check_limits(self._model, goal)
-        move = plan_joint_move(
-            self._q, goal, np.asarray(self._model.max_velocity), self._speed, self.control_rate_hz
-        )
-        if move.samples == 0:
-            return
-        u = np.arange(1, CHECKPOINTS + 1, dtype=np.float64) / CHECKPOINTS
-        self._refuse_collision(move.at_fraction(u))
+        """Plan seed 000's joint move to ``goal`` (or refuse it) and play it."""
+        move = plan_move(self._model, self._world, self._q, goal, self._speed, self.control_rate_hz)
         await self._play(move.samples, lambda k: self._set_joints(move.at(k)))
-
-    def _refuse_collision(self, checkpoints: Array) -> None:
-        hit = first_collision(
-            self._model, checkpoints, self._world.obstacles, self._config.clearance
-        )
-        if hit is not None:
-            name = self._world.obstacle_names[hit.obstacle]
-            raise _command_failed(
-                FailureReason.COLLISION,
-                f"link {hit.link} would hit obstacle {hit.obstacle} ({name}) at trajectory "
-                f"point {hit.point} of {CHECKPOINTS}; insert a safe intermediate point and "
-                "move in steps",
-                aux=(float(hit.link), float(hit.obstacle), float(hit.point), 0.0),
-            )
-
-    def _refuse_singular(self, q: Array, point: int = 0) -> None:
-        region = singular_region(self._model, q)
-        if region is not None:
-            kind, margin = region
-            limit = SINGULAR_THRESHOLDS[kind - 1]
-            where = f" at trajectory point {point}" if point else ""
-            raise _command_failed(
-                FailureReason.SINGULAR,
-                f"the pose{where} is in the {kind.name.lower()} singular region "
-                f"(margin {margin:.3f} < {limit}); choose a pose away from it or move the "
-                "joints directly",
-                aux=(float(kind), margin, limit, float(point)),
-            )
 
     def _solve(self, p: Array, s: Array, a: Array) -> Array:
         """Inverse kinematics for P, S, A nearest the current joints; refuses singular poses."""
-        q = inverse(self._model, frame_from_psa(p, s, a), self._q)
-        self._refuse_singular(q)
-        return q
+        return solve_pose(self._model, frame_from_psa(p, s, a), self._q)
 
     def _move_fingers(self, target: float) -> tuple[int, Callable[[int], None]]:
         start, delta = self._opening, target - self._opening
@@ -456,118 +404,34 @@ class SimulatedArm:
         )
 
     async def _move_cartesian_delta(self, command: Command) -> Aux:
-        """Seed 004: an incremental move; all zero is index mode; singular regions bounce.
-
-        The increment is applied to the hand frame (translation in the base
-        frame, rotation about the base axes through P) and the new frame is
-        solved in closed form, not by seed 004's inverse-Jacobian step: the
-        result is exact, so the "drift ... due to accumulation of
-        differentiation (linearization) error" that seed 004 leaves uncorrected
-        cannot build up over many increments.
-        """
+        """Seed 004: an incremental move (see :func:`solve_increment`); all zero is index mode."""
         dp = np.array(command.args[0:3])
         dr = np.array(command.args[3:6])
         if not dp.any() and not dr.any():
             return NO_AUX  # index mode: the hand controller moves, the arm does not
-        target = np.eye(4)
-        target[:3, :3] = rotation_about(dr) @ self._frame[:3, :3]
-        target[:3, 3] = self._frame[:3, 3] + dp
         pose_change = CommandFlags.POSE_CHANGE in command.flags
-        here = singular_region(self._model, self._q)
-        if pose_change or here is not None:
-            goal = inverse(self._model, target, self._q)
-        else:
-            # Away from singular regions the arm keeps its pose (seed 004).
-            goal = inverse(self._model, target, self._q, keep_branch=branch(self._model, self._q))
-        there = singular_region(self._model, goal)
-        if there is not None and not pose_change:
-            deeper = here is None or here[0] != there[0] or there[1] < here[1]
-            if deeper:
-                kind, margin = there
-                raise _command_failed(
-                    FailureReason.SINGULAR,
-                    f"the move would enter the {kind.name.lower()} singular region (margin "
-                    f"{margin:.3f} < {SINGULAR_THRESHOLDS[kind - 1]}); the arm stays in its "
-                    "pose: set POSE_CHANGE to pass through and change pose",
-                    aux=(float(kind), margin, SINGULAR_THRESHOLDS[kind - 1], 0.0),
-                )
+        goal = solve_increment(self._model, self._q, self._frame, dp, dr, pose_change)
         await self._move_to(goal)
         return NO_AUX
 
     async def _move_path(self, command: Command) -> Aux:
         """Seed 003 Level 2: via points joined by straight lines and parabolic blends."""
         n = int(command.args[0])
-        blend = command.args[1] or self._config.blend_time
-        vias = np.array(command.args[2 : 2 + 3 * n]).reshape(n, 3)
-        rotation = self._frame[:3, :3].copy()
-        start_q = self._q.copy()
-        # The via points themselves first: "out of reach" is the root cause
-        # an operator needs, not the joint that first strains on the way there.
-        frame = np.eye(4)
-        frame[:3, :3] = rotation
-        for i, via in enumerate(vias, start=1):
-            frame[:3, 3] = via
-            try:
-                inverse_candidates(self._model, frame, start_q)
-            except CommandFailed as exc:
-                raise _command_failed(
-                    exc.reason, f"via point {i}: {exc.message}", exc.aux
-                ) from None
-        keep = None if singular_region(self._model, start_q) else branch(self._model, start_q)
-        vmax = np.asarray(self._model.max_velocity) * self._speed
-        speed = self._config.cartesian_speed * self._speed
-        for _ in range(PATH_RETIMES + 1):
-            path = plan_path(self._frame[:3, 3], vias, speed, blend, self.control_rate_hz)
-            if path.duration > MAX_PATH_SECONDS:
-                raise _command_failed(
-                    FailureReason.BAD_ARGUMENT,
-                    f"the path would take {path.duration:.0f} s at speed fraction "
-                    f"{self._speed:g} (limit {MAX_PATH_SECONDS:.0f} s); raise the speed or "
-                    "split the path",
-                )
-            positions, _velocities, corrections = integrate_path(path)
-            joints = self._path_joints(positions, rotation, start_q, keep)
-            rates = np.abs(np.diff(joints, axis=0)) * self.control_rate_hz
-            excess = float(np.max(rates / vmax))
-            if excess <= 1.0:
-                break
-            # Near the edges of the workspace a hand speed needs more joint
-            # speed than allowed: slow the whole path down and plan again.
-            speed /= excess * 1.05
-        else:
-            raise _command_failed(
-                FailureReason.SINGULAR,
-                "the path needs joint velocities beyond the allowed maximum even when slowed; "
-                "keep it away from singular regions or move the joints directly",
-            )
-        total = len(joints) - 1
-        self._refuse_collision(joints[checkpoint_samples(total)])
-        self._drift_corrections += corrections
-        await self._play(total, lambda k: self._set_joints(joints[k]))
-        return (path.duration, float(corrections), 0.0, 0.0)
-
-    def _path_joints(
-        self, positions: Array, rotation: Array, start: Array, keep: tuple[int, int, int] | None
-    ) -> Array:
-        """Joint vectors along a Cartesian path; refuses limits, reach and singular regions."""
-        total = len(positions) - 1
-        joints = np.empty((len(positions), 6))
-        joints[0] = start
-        frame = np.eye(4)
-        frame[:3, :3] = rotation
-        for k in range(1, len(positions)):
-            frame[:3, 3] = positions[k]
-            point = max(1, math.ceil(k * CHECKPOINTS / total))
-            try:
-                joints[k] = inverse(self._model, frame, joints[k - 1], keep_branch=keep)
-            except CommandFailed as exc:
-                raise _command_failed(
-                    exc.reason,
-                    f"{exc.message} (along the path near trajectory point {point})",
-                    exc.aux,
-                ) from None
-            self._refuse_singular(joints[k], point)
-        return joints
+        plan = plan_cartesian_path(
+            self._model,
+            self._world,
+            self._q.copy(),
+            self._frame.copy(),
+            np.array(command.args[2 : 2 + 3 * n]).reshape(n, 3),
+            blend_time=command.args[1] or self._config.blend_time,
+            hand_speed=self._config.cartesian_speed * self._speed,
+            speed=self._speed,
+            rate_hz=self.control_rate_hz,
+        )
+        self._drift_corrections += plan.drift_corrections
+        joints = plan.joints
+        await self._play(len(joints) - 1, lambda k: self._set_joints(joints[k]))
+        return (plan.duration, float(plan.drift_corrections), 0.0, 0.0)
 
     async def _open_fingers(self, command: Command) -> Aux:
         target = command.args[0] or self._config.max_opening

@@ -99,3 +99,34 @@ def test_an_added_obstacle_is_refused_then_passed_over_an_intermediate_point() -
         np.testing.assert_allclose(result.feedback.p, drop, atol=1e-9)
 
     trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+def test_the_planner_previews_the_approach_without_trio() -> None:
+    """A local predictive model calls the same planner the arm runs (no clock needed)."""
+    from linksim._planner import plan_cartesian_path
+    from linksim._world import World
+
+    task = rock_task(DEFAULT_WORLD)
+    approach = task.commands[1]
+    arm = SimulatedArm(DEFAULT_WORLD)
+    vias = np.array(approach.args[2:8]).reshape(2, 3)
+    plan = plan_cartesian_path(
+        arm.model,
+        World(DEFAULT_WORLD),
+        arm.joints,
+        hand_frame(arm.model, arm.joints),
+        vias,
+        blend_time=DEFAULT_WORLD.blend_time,
+        hand_speed=DEFAULT_WORLD.cartesian_speed,
+        speed=1.0,
+        rate_hz=125.0,
+    )
+    np.testing.assert_allclose(hand_frame(arm.model, plan.joints[-1])[:3, 3], vias[-1], atol=1e-9)
+
+    async def main() -> None:
+        await arm.execute(task.commands[0])
+        result = await arm.execute(approach)
+        assert result.aux[0] == plan.duration
+        np.testing.assert_array_equal(arm.joints, plan.joints[-1])
+
+    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
