@@ -40,7 +40,7 @@ from tcpstream._commands import (
     validate_arguments,
 )
 
-from ._collision import first_collision
+from ._collision import Load, first_collision
 from ._config import ConfigError
 from ._kinematics import (
     PUMA560,
@@ -334,8 +334,16 @@ class SimulatedArm:
 
     async def _move_to(self, goal: Array) -> None:
         """Plan seed 000's joint move to ``goal`` (or refuse it) and play it."""
-        move = plan_move(self._model, self._world, self._q, goal, self._speed, self.control_rate_hz)
+        move = plan_move(
+            self._model, self._world, self._q, goal, self._speed, self.control_rate_hz, self._load()
+        )
         await self._play(move.samples, lambda k: self._set_joints(move.at(k)))
+
+    def _load(self) -> Load | None:
+        """The object in the hand, for the collision check."""
+        if self._grasped is None:
+            return None
+        return Load(self._grasp_offset.copy(), self._world.objects[self._grasped].size)
 
     def _solve(self, p: Array, s: Array, a: Array) -> Array:
         """Inverse kinematics for P, S, A nearest the current joints; refuses singular poses."""
@@ -427,6 +435,7 @@ class SimulatedArm:
             hand_speed=self._config.cartesian_speed * self._speed,
             speed=self._speed,
             rate_hz=self.control_rate_hz,
+            load=self._load(),
         )
         self._drift_corrections += plan.drift_corrections
         joints = plan.joints

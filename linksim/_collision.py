@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._kinematics import LINK_SEGMENTS, ArmModel, Array, link_points
+from ._kinematics import LINK_SEGMENTS, ArmModel, Array, hand_frame, link_points
 
-__all__ = ["Collision", "first_collision", "segments_hit_boxes"]
+__all__ = ["LOAD_CONTACT_SLACK", "Collision", "Load", "first_collision", "segments_hit_boxes"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,15 +61,38 @@ def segments_hit_boxes(back: Array, front: Array, boxes: Array) -> Array:
     return np.asarray(lam_lo <= lam_hi)
 
 
+@dataclass(frozen=True, slots=True)
+class Load:
+    """An object held in the hand: its centre in the hand frame (m) and its size (m).
+
+    For the collision check it is the segment through its centre along the
+    approach vector A, as long as the object less :data:`LOAD_CONTACT_SLACK`
+    at each end, and counts as part of link 6.
+    """
+
+    offset: Array
+    size: float
+
+
+LOAD_CONTACT_SLACK = 0.001
+"""Metres trimmed off each end of a held object's segment, and it is checked
+without the links' clearance: the object touches the surface it was picked
+from (or is put down on), and that contact is not a collision."""
+
+
 def first_collision(
-    model: ArmModel, checkpoints: Array, obstacles: Array, clearance: float = 0.0
+    model: ArmModel,
+    checkpoints: Array,
+    obstacles: Array,
+    clearance: float = 0.0,
+    load: Load | None = None,
 ) -> Collision | None:
     """The earliest (checkpoint, link, obstacle) collision of a planned motion, or None.
 
     ``checkpoints`` (k, 6) are the joint vectors at the trajectory's check
     points, numbered 1..k in order; ``obstacles`` (n, 6) rows as in
     :func:`segments_hit_boxes`, grown by ``clearance`` metres on every side
-    (the links' thickness).
+    (the links' thickness).  A ``load`` in the hand is checked too, as link 6.
     """
     if len(obstacles) == 0 or len(checkpoints) == 0:
         return None
@@ -78,7 +101,15 @@ def first_collision(
     back = pts[:, [s[1] for s in LINK_SEGMENTS], :]
     front = pts[:, [s[2] for s in LINK_SEGMENTS], :]
     hits = segments_hit_boxes(back, front, grown)  # (k, links, n)
+    links = [s[0] for s in LINK_SEGMENTS]
+    if load is not None:
+        frames = np.stack([hand_frame(model, q) for q in checkpoints])  # (k, 4, 4)
+        centre = frames[:, :3, :3] @ load.offset + frames[:, :3, 3]
+        half = max(0.0, load.size / 2.0 - LOAD_CONTACT_SLACK) * frames[:, :3, 2]
+        held = segments_hit_boxes(centre - half, centre + half, obstacles)  # (k, n)
+        hits = np.concatenate([hits, held[:, None, :]], axis=1)
+        links.append(6)
     if not hits.any():
         return None
     point, link, obstacle = (int(i[0]) for i in np.nonzero(hits))
-    return Collision(LINK_SEGMENTS[link][0], obstacle, point + 1)
+    return Collision(links[link], obstacle, point + 1)

@@ -21,7 +21,7 @@ import numpy as np
 
 from tcpstream._commands import CommandFailed, FailureReason
 
-from ._collision import first_collision
+from ._collision import Load, first_collision
 from ._kinematics import (
     SINGULAR_THRESHOLDS,
     ArmModel,
@@ -70,9 +70,11 @@ def _failed(
     return CommandFailed(reason, message, aux=aux)
 
 
-def refuse_collision(model: ArmModel, world: World, checkpoints: Array) -> None:
+def refuse_collision(
+    model: ArmModel, world: World, checkpoints: Array, load: Load | None = None
+) -> None:
     """Raise COLLISION (aux: link, obstacle row, trajectory point, 0) for the first hit."""
-    hit = first_collision(model, checkpoints, world.obstacles, world.config.clearance)
+    hit = first_collision(model, checkpoints, world.obstacles, world.config.clearance, load)
     if hit is not None:
         name = world.obstacle_names[hit.obstacle]
         raise _failed(
@@ -108,18 +110,25 @@ def solve_pose(model: ArmModel, frame: Array, q_ref: Array) -> Array:
 
 
 def plan_move(
-    model: ArmModel, world: World, start: Array, goal: Array, speed: float, rate_hz: float
+    model: ArmModel,
+    world: World,
+    start: Array,
+    goal: Array,
+    speed: float,
+    rate_hz: float,
+    load: Load | None = None,
 ) -> JointMove:
     """Seed 000's joint move: limits at the goal, the twenty-point collision check.
 
     The quintic is monotonic, so a goal within the limits keeps every
-    intermediate point within them (seed 000).
+    intermediate point within them (seed 000).  ``load``: the object in the
+    hand, checked with link 6.
     """
     check_limits(model, goal)
     move = plan_joint_move(start, goal, np.asarray(model.max_velocity), speed, rate_hz)
     if move.samples > 0:
         u = np.arange(1, CHECKPOINTS + 1, dtype=np.float64) / CHECKPOINTS
-        refuse_collision(model, world, move.at_fraction(u))
+        refuse_collision(model, world, move.at_fraction(u), load)
     return move
 
 
@@ -183,6 +192,7 @@ def plan_cartesian_path(
     hand_speed: float,
     speed: float,
     rate_hz: float,
+    load: Load | None = None,
 ) -> PathPlan:
     """Seed 003 Level 2 from the hand ``frame`` (at joints ``start``) through ``vias`` (n, 3).
 
@@ -228,7 +238,7 @@ def plan_cartesian_path(
             "the path needs joint velocities beyond the allowed maximum even when slowed; "
             "keep it away from singular regions or move the joints directly",
         )
-    refuse_collision(model, world, joints[checkpoint_samples(len(joints) - 1)])
+    refuse_collision(model, world, joints[checkpoint_samples(len(joints) - 1)], load)
     return PathPlan(joints, path.duration, corrections)
 
 

@@ -9,9 +9,9 @@ coordinate system"), metres, radians, kilograms, newtons, seconds.
 * Objects are cubes of edge ``size`` with a mass; the gripper can hold one.
   A released object falls straight down and comes to rest on the highest
   obstacle top (or the floor) under its centre.  Objects are not obstacles:
-  the planner checks the arm's links against the boxes only, so neither an
-  object on the table nor the one in the hand is collision-checked (a bin is
-  modelled, seed-000 style, by its circumscribing box).
+  the planner checks the arm's links, and the object in the hand, against
+  the boxes only, so the hand may pass through an object lying on the table
+  (a bin is modelled, seed-000 style, by its circumscribing box).
 
 Invalid values raise :class:`~linksim.ConfigError` naming the field.  Sans-I/O
 apart from :meth:`WorldConfig.from_toml`, which reads the file it is given.

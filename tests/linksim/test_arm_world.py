@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import pathlib
 from collections.abc import Awaitable, Callable
@@ -245,5 +246,37 @@ def test_narrowing_the_opening_stops_on_an_object_between_the_fingers() -> None:
         again = await arm.execute(Command(CommandCode.CLOSE_FINGERS))
         assert again.feedback == gripped.feedback
         assert trio.current_time() == t0
+
+    run(main)
+
+
+def test_a_held_object_is_collision_checked_with_the_hand() -> None:
+    table = ObstacleSpec("table", (0.25, -0.75, -0.672), (0.95, 0.75, -0.35))
+    kerb = ObstacleSpec("kerb", (0.60, -0.3, -0.35), (0.62, 0.5, -0.33))
+    config = WorldConfig(
+        initial_joints=HOME,
+        obstacles=(table, kerb),
+        objects=(ObjectSpec("rock", (0.55, 0.15, -0.315), 0.07, 0.85),),
+    )
+    across = Command(CommandCode.MOVE_PATH, (1.0, 0.0, 0.70, 0.15, -0.315))
+
+    async def main() -> None:
+        empty_handed = SimulatedArm(dataclasses.replace(config, objects=()))
+        await empty_handed.execute(Command(CommandCode.MOVE_TO_POSITION, (0.55, 0.15, -0.315)))
+        # The fingertips clear the 2 cm kerb by 5 mm (with the links' 1 cm clearance) ...
+        await empty_handed.execute(across)
+
+        arm = SimulatedArm(config)
+        await arm.execute(Command(CommandCode.MOVE_TO_POSITION, (0.55, 0.15, -0.315)))
+        await arm.execute(Command(CommandCode.CLOSE_FINGERS))
+        assert arm.grasped == "rock"
+        # ... the rock hanging 3.5 cm below them does not; lifting it off the
+        # table it rested on is no collision.
+        with pytest.raises(CommandFailed) as info:
+            await arm.execute(across)
+        assert info.value.reason is FailureReason.COLLISION
+        assert info.value.aux[:2] == (6.0, 1.0)
+        await arm.execute(Command(CommandCode.MOVE_CARTESIAN_DELTA, (0.0, 0.0, 0.05)))
+        await arm.execute(Command(CommandCode.MOVE_PATH, (1.0, 0.0, 0.70, 0.15, -0.265)))
 
     run(main)
