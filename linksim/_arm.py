@@ -57,6 +57,7 @@ from ._planner import (
     solve_increment,
     solve_pose,
 )
+from ._trajectory import QUINTIC_PEAK_RATE, quintic
 from ._world import DEFAULT_WORLD, World, WorldConfig
 
 __all__ = ["ArmStatistics", "SimulatedArm"]
@@ -350,13 +351,13 @@ class SimulatedArm:
         return solve_pose(self._model, frame_from_psa(p, s, a), self._q)
 
     def _move_fingers(self, target: float) -> tuple[int, Callable[[int], None]]:
+        """Samples and step for the fingers: the same quintic, peaking at the finger speed."""
         start, delta = self._opening, target - self._opening
-        seconds = 1.875 * abs(delta) / self._config.finger_speed
+        seconds = QUINTIC_PEAK_RATE * abs(delta) / self._config.finger_speed
         samples = math.ceil(seconds * self.control_rate_hz - 1e-9) if delta else 0
 
         def step(k: int) -> None:
-            u = k / samples
-            self._opening = start + delta * u**3 * (10 + u * (-15 + 6 * u))
+            self._opening = target if k >= samples else start + delta * float(quintic(k / samples))
 
         return samples, step
 

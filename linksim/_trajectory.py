@@ -57,17 +57,17 @@ QUINTIC_PEAK_RATE = 15.0 / 8.0
 """max over u of g'(u) for the quintic g, reached at u = 1/2."""
 
 
-def quintic(u: Array) -> Array:
+def quintic(u: Array | float) -> Array:
     """g(u) = 10u^3 - 15u^4 + 6u^5: 0 -> 1, g' = g'' = 0 at both ends, monotonic."""
     return np.asarray(u * u * u * (10.0 + u * (-15.0 + 6.0 * u)), dtype=np.float64)
 
 
-def quintic_rate(u: Array) -> Array:
+def quintic_rate(u: Array | float) -> Array:
     """g'(u) = 30u^2 (1 - u)^2."""
     return np.asarray(30.0 * u * u * (1.0 - u) ** 2, dtype=np.float64)
 
 
-def quintic_acceleration(u: Array) -> Array:
+def quintic_acceleration(u: Array | float) -> Array:
     """g''(u) = 60u (1 - u)(1 - 2u)."""
     return np.asarray(60.0 * u * (1.0 - u) * (1.0 - 2.0 * u), dtype=np.float64)
 
