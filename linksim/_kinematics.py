@@ -345,8 +345,11 @@ def inverse_candidates(model: ArmModel, target: Array, q_ref: Array) -> list[Arr
             u = a2 + a3 * math.cos(q3) - d4 * math.sin(q3)
             v = a3 * math.sin(q3) + d4 * math.cos(q3)
             q2 = math.atan2(h, r) - math.atan2(v, u)
-            q123 = np.array([q1, q2, q3, 0.0, 0.0, 0.0])
-            r03 = joint_frames(model, q123)[3][:3, :3]
+            r03 = (
+                _dh(model.a[0], model.alpha[0], model.d[0], q1)
+                @ _dh(model.a[1], model.alpha[1], model.d[1], q2)
+                @ _dh(model.a[2], model.alpha[2], model.d[2], q3)
+            )[:3, :3]
             for q4, q5, q6 in _wrist_angles(r03.T @ rot, float(q_ref[3])):
                 out.append(np.array([q1, q2, q3, q4, q5, q6]))
     return out
