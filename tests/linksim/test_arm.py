@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Awaitable, Callable
 
@@ -468,3 +469,74 @@ def test_path_to_an_unreachable_via_point_names_the_point() -> None:
         np.testing.assert_array_equal(arm.joints, HOME)
 
     run(main)
+
+
+command_strategy = st.one_of(
+    st.builds(
+        lambda j, d: Command(CommandCode.MOVE_JOINT, (float(j), d)),
+        st.integers(1, 6),
+        st.floats(-3.0, 3.0),
+    ),
+    st.builds(lambda f: Command(CommandCode.CHANGE_SPEED, (f,)), st.floats(0.2, 1.0)),
+    st.builds(
+        lambda d: Command(CommandCode.MOVE_CARTESIAN_DELTA, d),
+        st.tuples(*(st.floats(-0.2, 0.2),) * 6),
+    ),
+    st.builds(
+        lambda p: Command(CommandCode.MOVE_TO_POSITION, p),
+        st.tuples(st.floats(0.1, 1.0), st.floats(-0.5, 0.5), st.floats(-0.5, 0.3)),
+    ),
+    st.builds(
+        lambda p: Command(CommandCode.MOVE_PATH, (1.0, 0.0, *p)),
+        st.tuples(st.floats(0.2, 0.9), st.floats(-0.4, 0.4), st.floats(-0.4, 0.2)),
+    ),
+    st.sampled_from(
+        [
+            Command(CommandCode.CLOSE_FINGERS),
+            Command(CommandCode.OPEN_FINGERS),
+            Command(CommandCode.REINITIALIZE),
+            Command(CommandCode.ADD_OBSTACLE, (0.45, -0.05, -0.4, 0.55, 0.05, -0.2)),
+        ]
+    ),
+)
+
+
+@settings(max_examples=25)
+@given(st.lists(st.tuples(command_strategy, st.booleans()), min_size=1, max_size=8))
+def test_random_command_sequences_keep_the_arm_consistent(
+    script: list[tuple[Command, bool]],
+) -> None:
+    """Fuzz: whatever the commands and stops, every sample is within the limits and
+    the feedback matches the joints; refusals leave the arm where it was."""
+    samples: list[Feedback] = []
+    config = dataclasses.replace(DEFAULT_WORLD, telemetry_every=1)
+    arm = SimulatedArm(config, telemetry=samples.append)
+    lo, hi = np.array(PUMA560.lower), np.array(PUMA560.upper)
+
+    async def main() -> None:
+        for command, stop_early in script:
+            before = arm.joints
+            failure: CommandFailed | None = None
+            with trio.move_on_after(0.3 if stop_early else math.inf) as scope:
+                try:
+                    await arm.execute(command)
+                except CommandFailed as exc:
+                    failure = exc
+            if failure is not None:
+                assert failure.feedback is not None
+                assert failure.feedback.error is failure.reason
+                # A refusal happens at planning time: nothing moved.
+                np.testing.assert_array_equal(arm.joints, before)
+            if scope.cancelled_caught:
+                arm.halt(FailureReason.STOPPED)
+                assert arm.state().error is FailureReason.STOPPED
+            assert not arm.statistics().moving
+            fb = arm.state()
+            np.testing.assert_allclose(fb.p, hand_frame(arm.model, arm.joints)[:3, 3], atol=1e-12)
+
+    run(main)
+    for fb in samples:
+        q = np.array(fb.joints)
+        assert np.all(q >= lo - 1e-9)
+        assert np.all(q <= hi + 1e-9)
+        np.testing.assert_allclose(fb.p, hand_frame(PUMA560, q)[:3, 3], atol=1e-12)
