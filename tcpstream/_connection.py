@@ -118,6 +118,7 @@ class _Connection:
         self._recv_dir = _auth.TO_CLIENT if self.side is Side.CLIENT else _auth.TO_SERVER
         self._inbuf = bytearray()
         self._out: list[bytes] = []
+        self._out_bytes = 0
         # Bounded by construction: every received packet yields at most two events
         # and the application drains them after each receive_data/handle_timer.
         self._events: deque[Event] = deque()
@@ -203,7 +204,23 @@ class _Connection:
         """Everything queued for the stream since the last call."""
         out = b"".join(self._out)
         self._out.clear()
+        self._out_bytes = 0
         return out
+
+    @property
+    def buffered(self) -> int:
+        """Bytes queued by the connection and not yet taken by :meth:`data_to_send`."""
+        return self._out_bytes
+
+    def abandon(self, reason: CloseReason, message: str) -> None:
+        """Give the session up without a BYE (the stream cannot carry one); drops output."""
+        if self._state is SessionState.CLOSED:
+            return
+        self._move(Trigger.FAULT)
+        self.close_reason = reason
+        self._out.clear()
+        self._out_bytes = 0
+        self._events.append(SessionEnded(reason, message, by_peer=False))
 
     def next_event(self) -> Event | None:
         return self._events.popleft() if self._events else None
@@ -271,6 +288,7 @@ class _Connection:
         else:
             raw = unsigned
         self._out.append(raw)
+        self._out_bytes += len(raw)
         if trace.isEnabledFor(logging.DEBUG):
             trace.debug("%s out: %s", self.side.value, stamped.describe())
         self._last_out = now

@@ -84,6 +84,8 @@ class CloseReason(enum.IntEnum):
     """The same controller connected again; this older connection is retired."""
     IDLE = 10
     """The controller sent no command for the arm's idle timeout; control is released."""
+    STALLED = 11
+    """The peer stopped reading: output backed up past the bound (local only, no BYE)."""
 
 
 @dataclass(frozen=True, slots=True)

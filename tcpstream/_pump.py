@@ -28,11 +28,12 @@ RECEIVE_CHUNK = 16 * PACKET_SIZE
 """Bytes asked of the stream per read: a burst of pipelined replies in one wake-up."""
 
 MAX_PENDING_BYTES = 256 * PACKET_SIZE
-"""Output waiting for a peer that does not read.  The arm produces at most three
-packets per command (accepted, completed or failed, plus a telemetry slot that
-is skipped while output is pending), and the queue holds 32 commands, so an
-honest peer never gets near 256 packets; past it the peer is not reading and
-the connection is given up rather than letting memory grow."""
+"""Output waiting (not yet taken by the writer) for a peer that does not read.
+The arm produces at most three packets per command (accepted, completed or
+failed, plus a telemetry slot that is skipped while output is pending), and
+the queue holds 33 commands, so an honest peer never gets near 256 packets;
+past it the peer is not reading and the connection is given up rather than
+letting memory grow."""
 
 _NO_LINGER = frozenset(
     {
@@ -40,6 +41,7 @@ _NO_LINGER = frozenset(
         CloseReason.HANDSHAKE_TIMEOUT,
         CloseReason.GARBAGE,
         CloseReason.PEER_EOF,
+        CloseReason.STALLED,
     }
 )
 
@@ -65,6 +67,10 @@ class Pump:
         self._sending = False
         self._done = trio.Event()
         self._reader_done = trio.Event()
+        self._scope: trio.CancelScope | None = None
+        self._close_by: float | None = None
+        """When the session closed plus the linger time: flushing and lingering
+        together end by then."""
         self.bytes_in = 0
         self.bytes_out = 0
 
@@ -75,7 +81,20 @@ class Pump:
 
     def kick(self) -> None:
         """Call after anything that made the connection produce output or move its timer."""
+        if self.conn.buffered > MAX_PENDING_BYTES:
+            # The writer is stuck in send_all: the peer is not reading.  Give up
+            # rather than let memory grow; the run's scope stops the writer.
+            log.warning("peer is not reading; dropping the connection")
+            self.conn.abandon(CloseReason.STALLED, "the peer stopped reading")
+            if self._scope is not None:
+                self._scope.cancel()
         self.drain_events()
+        if self.conn.closed and self._scope is not None and self._scope.deadline == math.inf:
+            # Over: the last packets get a bounded time to go out.  A peer that
+            # stopped reading would otherwise hold the writer -- and this
+            # connection's slot -- in send_all forever.
+            self._close_by = trio.current_time() + self._linger()
+            self._scope.deadline = self._close_by
         self._wake.set()
         # Wake the timer only if its deadline moved earlier (a state change):
         # sends and receives only push heartbeat and silence deadlines later,
@@ -97,6 +116,7 @@ class Pump:
         """Pump until the session is CLOSED and its last packet is written; close the stream."""
         try:
             async with trio.open_nursery() as nursery:
+                self._scope = nursery.cancel_scope
                 nursery.start_soon(self._reader)
                 nursery.start_soon(self._timer)
                 await self._writer()
@@ -104,6 +124,10 @@ class Pump:
         finally:
             await self._close_stream()
             self._done.set()
+
+    def _linger(self) -> float:
+        params = self.conn.parameters
+        return max(CLOSE_TIMEOUT, params.dead_time if params is not None else 0.0)
 
     async def _close_stream(self) -> None:
         """Lingering close: half-close, let the peer's last bytes drain, then close.
@@ -114,13 +138,14 @@ class Pump:
         a final COMPLETED could be lost.  Bounded by the dead time (the peer
         hears the BYE within a round trip) and never shorter than CLOSE_TIMEOUT.
         """
-        params = self.conn.parameters
-        linger = max(CLOSE_TIMEOUT, params.dead_time if params is not None else 0.0)
+        close_by = self._close_by
+        if close_by is None:
+            close_by = trio.current_time() + self._linger()
         errors = (trio.BrokenResourceError, trio.ClosedResourceError, OSError)
         # Lingering is for a peer that is alive and closing too; one that fell
         # silent, never finished the handshake or sent garbage gets no grace.
         lingers = self.conn.close_reason not in _NO_LINGER
-        with trio.move_on_after(linger) as scope:
+        with trio.move_on_at(close_by) as scope:
             scope.shield = True
             if lingers and isinstance(self.stream, trio.abc.HalfCloseableStream):
                 try:
@@ -182,9 +207,6 @@ class Pump:
             self._wake = trio.Event()
             data = conn.data_to_send()
             if data:
-                if len(data) > MAX_PENDING_BYTES:
-                    log.warning("peer is not reading; dropping the connection")
-                    return
                 self._sending = True
                 try:
                     await self.stream.send_all(data)

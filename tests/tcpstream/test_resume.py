@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import pytest
 import trio
 import trio.testing
@@ -19,14 +21,17 @@ from tcpstream import (
     CommandResult,
     ControllerIdentity,
     FailureReason,
+    Packet,
     PacketKind,
     Refused,
     RefuseReason,
     Server,
     ServerConfig,
     SessionClosed,
+    SessionState,
     commands,
     decode_packet,
+    encode_packet,
 )
 
 from .fakearm import FakeArm
@@ -421,3 +426,59 @@ def test_a_restarted_arm_is_detected_even_before_any_reply() -> None:
     run(main)
     assert first_arm.count(CommandCode.MOVE_JOINTS) == 1
     assert second_arm.executed == []
+
+
+def test_a_controller_that_stops_reading_is_dropped_not_buffered_forever() -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        async with Server(arm, ServerConfig(telemetry_every=0)) as server:
+            client_end, server_end = trio.testing.lockstep_stream_pair()
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(server.serve_stream, server_end)
+                conn = ClientConnection(ControllerIdentity("deaf", 1))
+                conn.connect(trio.current_time())
+                await client_end.send_all(conn.data_to_send())
+                conn.receive_data(await client_end.receive_some(PACKET_SIZE), trio.current_time())
+                assert conn.state is SessionState.OPEN
+                # From here on: heartbeats out (so it is not silent), never a byte read.
+                counter = 1
+                while server.statistics().connections:
+                    await trio.sleep(0.25)
+                    counter += 1
+                    beat = encode_packet(Packet(PacketKind.HEARTBEAT, counter=counter))
+                    with (
+                        trio.move_on_after(1.0),
+                        contextlib.suppress(trio.BrokenResourceError),  # dropped at last
+                    ):
+                        await client_end.send_all(beat)
+                # The arm's heartbeats backed up, 256 packets at 4 per second.
+                assert 60.0 <= trio.current_time() <= 70.0
+                assert server.statistics().controller == "deaf"  # the lease runs on
+                nursery.cancel_scope.cancel()
+
+    run(main)
+
+
+def test_a_closed_session_does_not_wait_forever_on_a_peer_that_stopped_reading() -> None:
+    arm = FakeArm()
+
+    async def main() -> None:
+        async with Server(arm, ServerConfig(telemetry_every=0)) as server:
+            client_end, server_end = trio.testing.lockstep_stream_pair()
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(server.serve_stream, server_end)
+                conn = ClientConnection(ControllerIdentity("rude", 1))
+                conn.connect(trio.current_time())
+                await client_end.send_all(conn.data_to_send())
+                conn.receive_data(await client_end.receive_some(PACKET_SIZE), trio.current_time())
+                await trio.sleep(1.0)  # the arm's heartbeats now wait for a reader
+                conn.close(CloseReason.NORMAL, trio.current_time())
+                await client_end.send_all(conn.data_to_send())
+                t0 = trio.current_time()
+                while server.statistics().connections:
+                    await trio.sleep(0.1)
+                assert trio.current_time() - t0 <= 5.0 + 0.2  # CLOSE_TIMEOUT, not forever
+                nursery.cancel_scope.cancel()
+
+    run(main)
