@@ -13,7 +13,15 @@ from typing import Any
 
 import trio
 
-from . import _armserver, _bench_codec, _bench_goodput, _bench_relay, _demo_cli
+from . import (
+    _armserver,
+    _bench_codec,
+    _bench_goodput,
+    _bench_latency,
+    _bench_pty,
+    _bench_relay,
+    _demo_cli,
+)
 from ._config import PRESETS, ConfigError, DirectionConfig, GilbertElliott, LinkConfig, Outage
 from ._modem import CallOutcome, ModemConfig, ModemPair
 from ._relay import RelayStatistics, run_relay
@@ -218,6 +226,16 @@ def build_parser() -> argparse.ArgumentParser:
     brelay = bench_sub.add_parser("relay", help="pty relay throughput on a clean link")
     _bench_relay.add_arguments(brelay)
     brelay.set_defaults(func=_bench_relay.main)
+    bpty = bench_sub.add_parser(
+        "pty", help="serial socket goodput over a raw pty pair (wall clock)"
+    )
+    _bench_pty.add_arguments(bpty)
+    bpty.set_defaults(func=_bench_pty.main)
+    latency = bench_sub.add_parser(
+        "latency", help="command round trip over loopback TCP beside a raw echo (wall clock)"
+    )
+    _bench_latency.add_arguments(latency)
+    latency.set_defaults(func=_bench_latency.main)
     demo = sub.add_parser(
         "demo", help="a controller commands the simulated arm through the whole stack"
     )
