@@ -162,6 +162,11 @@ class ArmClient:
         self.identity = ControllerIdentity(
             identity, incarnation if incarnation is not None else secrets.randbits(64)
         )
+        # Check everything a connection would refuse now, in the caller's frame,
+        # not later inside the background task.
+        ClientConnection(self.identity, role=role, key=key)
+        if max_in_flight < 1 or reconnect_attempts < 0 or reconnect_delay < 0:
+            raise ValueError("max_in_flight >= 1, reconnect_attempts >= 0, reconnect_delay >= 0")
         self._key = key
         self.role = role
         self._reconnect_attempts = reconnect_attempts

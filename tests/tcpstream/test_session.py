@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 import trio
 
 from tcpstream import (
+    ArmClient,
     AuthenticationFailed,
     Command,
     CommandCode,
@@ -282,3 +285,21 @@ def test_server_refuses_what_is_not_an_executor() -> None:
     arm = FakeArm(control_rate_hz=0.0)
     with pytest.raises(ValueError, match="control_rate_hz"):
         Server(arm)
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        pytest.param({"identity": "x" * 33}, "identity", id="long-identity"),
+        pytest.param({"identity": ""}, "identity", id="empty-identity"),
+        pytest.param({"key": b"short"}, "16 bytes", id="short-key"),
+        pytest.param({"incarnation": 2**64}, "64 bits", id="incarnation"),
+        pytest.param({"max_in_flight": 0}, "max_in_flight", id="in-flight"),
+    ],
+)
+def test_client_options_are_checked_at_construction(options: dict[str, Any], match: str) -> None:
+    async def never() -> trio.abc.Stream:
+        raise AssertionError("not reached")
+
+    with pytest.raises(ValueError, match=match):
+        ArmClient(never, **options)
