@@ -482,3 +482,24 @@ def test_a_closed_session_does_not_wait_forever_on_a_peer_that_stopped_reading()
                 nursery.cancel_scope.cancel()
 
     run(main)
+
+
+def test_after_a_deadman_the_resumed_controller_learns_why_its_command_stopped() -> None:
+    arm = FakeArm(move_time=100.0)
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client(reconnect_delay=3.0) as c:  # dead time 1.4 s
+            handle = await c.submit(commands.move_joints([1.0] * 6))
+            await handle.accepted()
+            await w.break_link()
+            with pytest.raises(CommandFailed) as info:
+                await handle.completed()
+            assert info.value.reason is FailureReason.DEADMAN
+            assert c.reconnects == 1
+            stats = w.server.statistics()
+            assert (stats.deadman_trips, stats.duplicates_answered) == (1, 1)
+            assert (await c.status()).feedback is not None  # in control again
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINTS) == 1
+    assert arm.halts[0] is FailureReason.DEADMAN
