@@ -104,7 +104,7 @@ def demo_main(args: argparse.Namespace) -> int:
         )
         if args.window is not None or args.max_len is not None:
             endpoint_config_for(link, **_endpoint_overrides(options))  # validate early
-    except (ConfigError, ValueError, OSError) as exc:
+    except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim demo: {exc}", file=sys.stderr)
         return 2
     try:
