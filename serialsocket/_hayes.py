@@ -342,8 +342,9 @@ async def hangup(
     ``guard_time`` must be at least the modem's S12 guard time (S12 = 50
     fiftieths: 1 s by default); each guard here is 20 % longer for margin.
     Nothing else may write to the port meanwhile (close the serial socket
-    first).  If the carrier was already lost, ATH is still sent and
-    acknowledged.
+    first).  If the carrier was already lost, the modem is in command mode
+    and says nothing to ``+++``: that costs one full wait (1.2 x guard time +
+    ``command_timeout``) before ATH is sent and acknowledged.
 
     Raises:
         ModemTimeout: the modem did not acknowledge the escape and ATH.
