@@ -307,6 +307,15 @@ class Endpoint:
         return out
 
     @property
+    def control_pending(self) -> int:
+        """Control packets (ACK, NAK, E) queued for the next :meth:`data_to_send`.
+
+        An I/O loop can compare it around :meth:`read` to learn whether the
+        read queued a window update that its writer must send.
+        """
+        return len(self._control)
+
+    @property
     def readable(self) -> int:
         """Bytes :meth:`read` would return now."""
         return len(self._receiver.readable)

@@ -430,9 +430,12 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             await trio.lowlevel.checkpoint()
             while True:
                 self._check_open()
-                data = self._d.ep.read(max_bytes or _READ_SIZE, self._d.now())
+                ep = self._d.ep
+                queued = ep.control_pending
+                data = ep.read(max_bytes or _READ_SIZE, self._d.now())
                 if data:
-                    self._d.notify()  # a window update may be due
+                    if ep.control_pending != queued:
+                        self._d.notify()  # the read queued a window update: wake the writer
                     return data
                 if self._d.ep.at_eof:
                     return b""
