@@ -46,7 +46,8 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
     ap.add_argument(
         "--baud",
         type=int,
-        help=f"line rate in bit/s (default {_DEFAULT_BAUD}); also tells the protocol the rate",
+        help=f"port speed in bit/s (default {_DEFAULT_BAUD}); when given, the protocol also "
+        "paces to it (after dialing, the modem's CONNECT rate is used instead)",
     )
     if listening:
         ap.add_argument(
