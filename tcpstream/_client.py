@@ -91,6 +91,8 @@ class CommandHandle:
         self.result: CommandResult | None = None
         self.error: Exception | None = None
         self.sent = False
+        self.failures_seen = 0
+        """The highest failed request id this client had seen when it sent the command."""
         self._accepted = trio.Event()
         self._done = trio.Event()
 
@@ -188,6 +190,9 @@ class ArmClient:
         # The highest request id the arm has confirmed taking in (ACCEPTED or
         # COMPLETED): a GRANT reporting less means the arm's memory was lost.
         self._confirmed_highest = 0
+        # The highest request id of a FAILED reply received: sent with every
+        # command so the arm can tell what we knew (the failure barrier).
+        self._failures_seen = 0
         self._subscribers: set[trio.MemorySendChannel[Feedback]] = set()
         self.parameters: SessionParameters | None = None
         self.latest_telemetry: Feedback | None = None
@@ -341,6 +346,8 @@ class ArmClient:
             if handle is not None:
                 handle._accept(event.position)
         elif isinstance(event, Failed):
+            # The failure barrier: commands sent from now on say we know of it.
+            self._failures_seen = max(self._failures_seen, event.request_id)
             if event.request_id in self._pending:
                 error = CommandFailed(event.reason, event.message, event.aux)
                 self._resolve(event.request_id, None, error)
@@ -393,7 +400,7 @@ class ArmClient:
                 unknown = "the arm restarted or forgot this controller; outcome unknown"
                 self._resolve(rid, None, SessionClosed(unknown))
                 continue
-            conn.send_command(rid, handle.command, now)
+            conn.send_command(rid, handle.command, now, failures_seen=handle.failures_seen)
         pump.kick()
         self._ready.set()
 
@@ -453,7 +460,8 @@ class ArmClient:
         pump, conn = self._pump, self._conn
         assert pump is not None
         assert conn is not None
-        conn.send_command(rid, command, trio.current_time())
+        handle.failures_seen = self._failures_seen
+        conn.send_command(rid, command, trio.current_time(), failures_seen=handle.failures_seen)
         handle.sent = True
         pump.kick()
         return handle

@@ -81,10 +81,18 @@ class ClientConnection(_Connection):
             Packet(PacketKind.HELLO, flags=self._wanted, body=body.ljust(BODY_SIZE, b"\0")), now
         )
 
-    def send_command(self, request_id: int, command: Command, now: float) -> None:
-        """Send a command (EMERGENCY_STOP goes as its own packet kind)."""
+    def send_command(
+        self, request_id: int, command: Command, now: float, *, failures_seen: int = 0
+    ) -> None:
+        """Send a command (EMERGENCY_STOP goes as its own packet kind).
+
+        ``failures_seen``: the highest request id of a FAILED reply received so
+        far (PROTOCOL.md section 9, the failure barrier).
+        """
         if not 0 < request_id < 2**32:
             raise LocalProtocolError(f"request id {request_id} outside 1..2**32-1")
+        if not 0 <= failures_seen < 2**32:
+            raise LocalProtocolError(f"failures_seen {failures_seen} outside 0..2**32-1")
         self._move(Trigger.COMMAND)
         if command.code is CommandCode.EMERGENCY_STOP:
             self._send(
@@ -97,6 +105,7 @@ class ClientConnection(_Connection):
                 flags=command.flags,
                 code=command.code,
                 request_id=request_id,
+                aux=(float(failures_seen), 0.0, 0.0, 0.0),
                 body=words_body(command.args),
             ),
             now,

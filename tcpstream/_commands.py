@@ -124,6 +124,11 @@ class FailureReason(enum.IntEnum):
     """Halted because the controller fell silent for longer than the deadman time."""
     BAD_ARGUMENT = 9
     """Out-of-range or non-finite argument; aux[0] is the offending word index."""
+    SKIPPED = 10
+    """Not run: an earlier command of this controller failed at the arm (aux[0]
+    is its request id) and this one was sent before the controller had seen
+    that failure -- it was planned for a state the arm is not in.  Re-plan from
+    the arm's state (STATUS) and send again."""
     ARM_FAULT = 15
     """The executor failed unexpectedly; the message says how."""
 

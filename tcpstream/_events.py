@@ -140,6 +140,10 @@ class CommandReceived(Event):
 
     request_id: int
     command: Command
+    failures_seen: int = 0
+    """The highest request id of a FAILED reply the controller had received when
+    it sent this command (COMMAND aux[0]): the arm skips it if a later failure
+    happened that the controller could not have known about."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -71,9 +71,10 @@ class Lookup(enum.Enum):
 
 
 class _Record:
-    __slots__ = ("done", "highest", "in_flight")
+    __slots__ = ("barrier", "done", "highest", "in_flight")
 
     def __init__(self) -> None:
+        self.barrier = 0
         self.highest = 0
         self.in_flight: set[int] = set()
         self.done: OrderedDict[int, StoredReply] = OrderedDict()
@@ -139,6 +140,16 @@ class RequestMemory:
         rec.done[request_id] = reply
         while len(rec.done) > self.size:
             rec.done.popitem(last=False)
+
+    def barrier(self, identity: ControllerIdentity) -> int:
+        """The request id of this controller's latest failure at the arm (0: none)."""
+        rec = self._records.get(identity)
+        return rec.barrier if rec is not None else 0
+
+    def raise_barrier(self, identity: ControllerIdentity, request_id: int) -> None:
+        """Commands sent without having seen ``request_id``'s failure will be skipped."""
+        rec = self._record(identity)
+        rec.barrier = max(rec.barrier, request_id)
 
     def in_flight(self, identity: ControllerIdentity) -> int:
         rec = self._records.get(identity)

@@ -75,6 +75,8 @@ class ServerStatistics:
     duplicates_answered: int
     """Re-sent request ids answered from memory or attached to the running one."""
     expired: int
+    skipped: int
+    """Commands not run because an earlier one failed first (the failure barrier)."""
     emergency_stops: int
     deadman_trips: int
     bad_packets: int
@@ -88,6 +90,7 @@ class _Job:
     identity: ControllerIdentity
     request_id: int
     command: Command
+    failures_seen: int = 0
 
 
 class _Link:
@@ -159,6 +162,7 @@ class Server:
                 "commands_failed",
                 "duplicates_answered",
                 "expired",
+                "skipped",
                 "emergency_stops",
                 "deadman_trips",
                 "bad_packets",
@@ -272,7 +276,7 @@ class Server:
 
     def _on_event(self, link: _Link, event: Event) -> None:
         if isinstance(event, CommandReceived):
-            self._submit(link, event.request_id, event.command)
+            self._submit(link, event.request_id, event.command, event.failures_seen)
         elif isinstance(event, EmergencyStopRequested):
             self._emergency_stop(link, event.request_id)
         elif isinstance(event, ControlRequested):
@@ -352,11 +356,15 @@ class Server:
 
     def _finish(self, identity: ControllerIdentity, request_id: int, reply: StoredReply) -> None:
         self.memory.finish(identity, request_id, reply)
+        if isinstance(reply, StoredFailure) and reply.reason in _BARRIER_REASONS:
+            self.memory.raise_barrier(identity, request_id)
         key = "commands_completed" if isinstance(reply, StoredSuccess) else "commands_failed"
         self._stats[key] += 1
         self._reply(identity, request_id, reply)
 
-    def _submit(self, link: _Link, request_id: int, command: Command) -> None:
+    def _submit(
+        self, link: _Link, request_id: int, command: Command, failures_seen: int = 0
+    ) -> None:
         identity = link.identity
         assert identity is not None
         now = trio.current_time()
@@ -383,6 +391,9 @@ class Server:
             )
             return
         self.memory.start(identity, request_id)
+        if (skipped := self._skipped(identity, command, failures_seen)) is not None:
+            self._finish(identity, request_id, skipped)
+            return
         if self._terminating:
             self._finish(
                 identity,
@@ -406,12 +417,35 @@ class Server:
             )
             return
         position = len(self._queue) + (1 if self._running else 0)
-        self._queue.append(_Job(identity, request_id, command))
+        self._queue.append(_Job(identity, request_id, command, failures_seen))
         if command.code is CommandCode.TERMINATE:
             self._terminating = True
         self._stats["commands_accepted"] += 1
         link.conn.accepted(request_id, command.code, position, now)
         self._queue_wake.set()
+
+    def _skipped(
+        self, identity: ControllerIdentity, command: Command, failures_seen: int
+    ) -> StoredFailure | None:
+        """The failure barrier (PROTOCOL.md section 9): SKIPPED, or None to go ahead.
+
+        A pipelined command was planned assuming the ones before it succeed.  If
+        one of them failed at the arm and the controller had not seen that
+        failure when it sent this one, running it would act from a state nobody
+        planned for -- and on a long link the controller cannot stop it in time.
+        TERMINATE still ends the session (it moves nothing).
+        """
+        barrier = self.memory.barrier(identity)
+        if failures_seen >= barrier or command.code is CommandCode.TERMINATE:
+            return None
+        self._stats["skipped"] += 1
+        return StoredFailure(
+            command.code,
+            FailureReason.SKIPPED,
+            f"not run: command #{barrier} failed first and this one was sent before that "
+            "was known; re-plan from the arm's state and send again",
+            (float(barrier), 0.0, 0.0, 0.0),
+        )
 
     def _position(self, request_id: int) -> int:
         for i, job in enumerate(self._queue):
@@ -467,6 +501,11 @@ class Server:
                 await self._queue_wake.wait()
                 self._queue_wake = trio.Event()
             job = self._queue.popleft()
+            # A command that failed while this one waited blocks it, too.
+            skipped = self._skipped(job.identity, job.command, job.failures_seen)
+            if skipped is not None:
+                self._finish(job.identity, job.request_id, skipped)
+                continue
             self._running = job
             try:
                 reply = await self._execute(job)
@@ -572,6 +611,24 @@ class Server:
                     self._stats["telemetry_sent"] += 1
                 else:
                     self._stats["telemetry_skipped"] += 1
+
+
+_BARRIER_REASONS = frozenset(
+    {
+        FailureReason.JOINT_LIMIT,
+        FailureReason.UNREACHABLE,
+        FailureReason.SINGULAR,
+        FailureReason.COLLISION,
+        FailureReason.NO_OBJECT,
+        FailureReason.NOT_GRASPING,
+        FailureReason.BAD_ARGUMENT,
+        FailureReason.ARM_FAULT,
+        FailureReason.DEADMAN,
+    }
+)
+"""Failures the arm decided on while executing (or the deadman imposed): they
+raise the barrier.  Not STOPPED (the controller asked for it), nor refusals of
+commands that never ran (QUEUE_FULL, TERMINATING, EXPIRED, SKIPPED itself)."""
 
 
 def _failure(command: Command, reason: FailureReason, message: str) -> StoredFailure:

@@ -310,10 +310,16 @@ class ServerConnection(_Connection):
         if packet.kind is PacketKind.EMERGENCY_STOP or packet.code == CommandCode.EMERGENCY_STOP:
             self._events.append(EmergencyStopRequested(rid))
             return
+        seen = packet.aux[0]
+        if not (seen == int(seen) and 0 <= seen < 2**32):
+            self._reject(
+                FailureReason.BAD_PACKET, f"COMMAND aux[0] {seen!r} is no request id", rid, now
+            )
+            return
         command = Command(CommandCode(packet.code), packet.words(), CommandFlags(packet.flags))
         try:
             validate_arguments(command)
         except CommandFailed as exc:
             self.failed(rid, packet.code, exc.reason, exc.message, exc.aux, now)
             return
-        self._events.append(CommandReceived(rid, command))
+        self._events.append(CommandReceived(rid, command, int(seen)))

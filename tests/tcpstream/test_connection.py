@@ -445,3 +445,16 @@ def test_an_unknown_failure_reason_keeps_its_number() -> None:
     failed = [e for e in drain(pair.client) if isinstance(e, Failed)]
     assert failed[0].reason is FailureReason.ARM_FAULT
     assert failed[0].message.startswith("(reason code 200)")
+
+
+@pytest.mark.parametrize("seen", [0.5, -1.0, 2.0**32])
+def test_command_failures_seen_must_be_a_request_id(seen: float) -> None:
+    pair = Pair(server_key=None, client_key=None).open()
+    body = words_body([0.0] * 18)
+    raw = encode_packet(
+        Packet(PacketKind.COMMAND, code=2, request_id=1, counter=2, aux=(seen, 0, 0, 0), body=body)
+    )
+    pair.server.receive_data(raw, 0.0)
+    assert received_commands(drain(pair.server)) == []
+    reply = decode_packet(pair.server.data_to_send())
+    assert (reply.kind, reply.status) == (PacketKind.FAILED, FailureReason.BAD_PACKET)

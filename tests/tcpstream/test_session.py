@@ -8,21 +8,27 @@ import pytest
 import trio
 
 from tcpstream import (
+    PACKET_SIZE,
     ArmClient,
     AuthenticationFailed,
+    ClientConnection,
     Command,
     CommandCode,
     CommandFailed,
     CommandResult,
+    ControllerIdentity,
     FailureReason,
     Feedback,
     LocalProtocolError,
+    Packet,
+    PacketKind,
     Refused,
     RefuseReason,
     Role,
     Server,
     ServerConfig,
     commands,
+    decode_packet,
 )
 
 from .fakearm import FakeArm
@@ -303,3 +309,74 @@ def test_client_options_are_checked_at_construction(options: dict[str, Any], mat
 
     with pytest.raises(ValueError, match=match):
         ArmClient(never, **options)
+
+
+def test_commands_queued_behind_a_failure_are_skipped_not_run() -> None:
+    """The failure barrier: nothing planned after a failed command runs from the wrong place."""
+    arm = FakeArm(move_time=1.0)
+    arm.fail[CommandCode.MOVE_TO_POSITION] = FailureReason.UNREACHABLE
+
+    async def main() -> None:
+        async with wired(arm) as w, w.client() as c:
+            first = await c.submit(commands.move_joint(1, 0.1))
+            bad = await c.submit(commands.move_to((2.0, 0.0, 0.0)))
+            after = [await c.submit(commands.close_fingers()), await c.submit(commands.weigh())]
+            await first.completed()
+            with pytest.raises(CommandFailed) as failed:
+                await bad.completed()
+            assert failed.value.reason is FailureReason.UNREACHABLE
+            for handle in after:
+                with pytest.raises(CommandFailed) as info:
+                    await handle.completed()
+                assert info.value.reason is FailureReason.SKIPPED
+                assert info.value.aux[0] == bad.request_id
+                assert f"#{bad.request_id} failed first" in info.value.message
+            # Sent after the failure was seen: runs.
+            assert (await c.status()).feedback is not None
+            assert w.server.statistics().skipped == 2
+
+    run(main)
+    assert [c.code for c in arm.executed] == [
+        CommandCode.MOVE_JOINT,
+        CommandCode.MOVE_TO_POSITION,
+        CommandCode.STATUS,
+    ]
+
+
+def test_a_command_in_flight_when_an_earlier_one_fails_is_skipped() -> None:
+    """Sent before the controller could know of the failure, arriving after it: skipped."""
+    arm = FakeArm()
+    arm.fail[CommandCode.CENTER_FINGERS] = FailureReason.NO_OBJECT
+
+    async def main() -> None:
+        async with wired(arm) as w:
+            stream = await w.factory()
+            conn = ClientConnection(ControllerIdentity("raw", 5))
+            conn.connect(trio.current_time())
+            await stream.send_all(conn.data_to_send())
+            conn.receive_data(await stream.receive_some(PACKET_SIZE), trio.current_time())
+
+            buffer = bytearray()
+
+            async def exchange(rid: int, command: Command, seen: int) -> Packet:
+                conn.send_command(rid, command, trio.current_time(), failures_seen=seen)
+                await stream.send_all(conn.data_to_send())
+                while True:
+                    while len(buffer) < PACKET_SIZE:
+                        buffer.extend(await stream.receive_some())
+                    packet = decode_packet(bytes(buffer[:PACKET_SIZE]))
+                    del buffer[:PACKET_SIZE]
+                    if packet.kind in (PacketKind.COMPLETED, PacketKind.FAILED):
+                        return packet
+
+            failed = await exchange(1, commands.center_fingers(), 0)
+            assert failed.status == FailureReason.NO_OBJECT
+            late = await exchange(2, commands.open_fingers(), 0)  # planned before the failure
+            assert (late.status, late.aux[0]) == (FailureReason.SKIPPED, 1.0)
+            informed = await exchange(3, commands.open_fingers(), 1)
+            assert informed.kind is PacketKind.COMPLETED
+            stop = await exchange(4, commands.emergency_stop(), 0)  # never skipped
+            assert stop.kind is PacketKind.COMPLETED
+
+    run(main)
+    assert [c.code for c in arm.executed] == [CommandCode.CENTER_FINGERS, CommandCode.OPEN_FINGERS]
