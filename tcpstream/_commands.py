@@ -102,7 +102,9 @@ class CommandFlags(enum.IntFlag):
 class FailureReason(enum.IntEnum):
     """Why a command (or a packet) failed: the reason code of a ``failed`` reply.
 
-    1-15 are the arm's; 32 and up belong to the session and packet layers.
+    1-15 say what happened to a command at the arm (the executor raises them;
+    7, 8 and 10 the server sets when it stops, or skips, a command); 32 and up
+    belong to the session and packet layers.
     """
 
     NONE = 0
