@@ -37,11 +37,18 @@ LINKS = {
     "clean": LinkConfig.preset("clean"),
     "geo": LinkConfig.preset("geo"),
     "moon": LinkConfig.preset("moon"),
+    # Lossy and fast: byte errors, lost bytes and noise bytes on a 0.1 s line
+    # without a rate limit, so trio's 1 MiB duplex check takes seconds.  (The
+    # rate-limited lossy presets, phone-2400 and noisy-moon, pass as well, at
+    # about 35 s of CPU each; they are not part of the default run.)
+    "lossy": LinkConfig.symmetric(
+        DirectionConfig(delay=0.1, byte_error_rate=2e-4, loss=1e-4, noise=1e-4), seed=5
+    ),
 }
 # The rate-limited Earth-Moon line: trio's duplex check moves 1 MiB each way
 # at 9600 bit/s, about an hour of link time.  check_half_closeable_stream
-# runs check_two_way_stream first, so moon runs once, there.
-HALF_CLOSEABLE = ["clean", "geo", pytest.param("moon", marks=pytest.mark.slow)]
+# runs check_two_way_stream first, so moon and lossy run once, there.
+HALF_CLOSEABLE = ["clean", "geo", "lossy", pytest.param("moon", marks=pytest.mark.slow)]
 
 
 def maker_for(
