@@ -55,6 +55,11 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
         )
     else:
         ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
+        ap.add_argument(
+            "--connect-timeout",
+            type=float,
+            help="give up connecting after this many seconds (default: derived from the line)",
+        )
     ap.add_argument("--window", type=int, default=16, help=f"window, 1..{MAX_WINDOW} (default 16)")
     ap.add_argument(
         "--max-len",
@@ -111,6 +116,7 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
         one_way_delay=args.delay,
         line_rate=rate,
         dead_after=args.dead_after,
+        connect_timeout=getattr(args, "connect_timeout", None),
     )
 
 

@@ -59,7 +59,19 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     time.sleep(0.3)  # let the listener open its port (a connect retries anyway)
     with (tmp_path / "up").open("rb") as up_in:
         client = subprocess.run(
-            cli("connect", a, "--delay", "0.002", "--window", "8", "--trace"),
+            # The listener is a fresh process that may start slowly on a busy
+            # machine: give the connect time (the derived timeout is ~0.5 s).
+            cli(
+                "connect",
+                a,
+                "--delay",
+                "0.002",
+                "--window",
+                "8",
+                "--trace",
+                "--connect-timeout",
+                "30",
+            ),
             stdin=up_in,
             capture_output=True,
             timeout=GUARD,
@@ -102,8 +114,11 @@ def test_dial_and_answer_through_emulated_modems() -> None:
             "38400",
             "--delay",
             "0.002",
+            # The first RING comes 2 s after ATD: the answering program (a
+            # fresh process) must have reset its modem by then, or its ATZ
+            # would hang up the ringing call.
             "--dial-time",
-            "0.1",
+            "2.0",
             "--ring-interval",
             "0.3",
             "--handshake-time",
@@ -124,7 +139,7 @@ def test_dial_and_answer_through_emulated_modems() -> None:
         )
         time.sleep(0.5)  # the answering side resets its modem and waits for RING
         client = subprocess.run(
-            cli("connect", paths["a"], "--dial", "5551234"),
+            cli("connect", paths["a"], "--dial", "5551234", "--connect-timeout", "30"),
             input=upload,
             capture_output=True,
             timeout=GUARD,
