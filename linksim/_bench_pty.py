@@ -30,6 +30,9 @@ from serialsocket import EndpointConfig, SerialSocket, accept, connect, open_pty
 __all__ = ["add_arguments", "main", "measure", "run_bench_pty"]
 
 _DEFAULT_LENGTHS = (128, 4096)
+_DEAD_AFTER = 60.0
+"""Silence (s) before the link is declared dead: generous, so that a busy
+machine starving one side for a moment costs time, not the run."""
 _LIMIT = 300.0
 """Hang guard per transfer (s): 1 MB at a pathological 10 KB/s still fits."""
 
@@ -72,7 +75,7 @@ async def _transfer(data: bytes, config: EndpointConfig) -> float:
 def measure(size: int, runs: int, max_len: int, window: int) -> dict[str, object]:
     """Median goodput of ``runs`` transfers of ``size`` bytes with ``max_len`` packets."""
     data = os.urandom(size)
-    config = EndpointConfig(max_packet_length=max_len, window=window)
+    config = EndpointConfig(max_packet_length=max_len, window=window, dead_after=_DEAD_AFTER)
     times = [trio.run(_transfer, data, config) for _ in range(runs)]
     median = statistics.median(times)
     return {
@@ -100,7 +103,7 @@ def run_bench_pty(
         prof = cProfile.Profile()
         data = os.urandom(size)
         for n in lengths:
-            cfg = EndpointConfig(max_packet_length=n, window=window)
+            cfg = EndpointConfig(max_packet_length=n, window=window, dead_after=_DEAD_AFTER)
             prof.runcall(trio.run, _transfer, data, cfg)
         prof.dump_stats(profile)
     return {"benchmark": "pty", "cpus": os.cpu_count(), "results": results}

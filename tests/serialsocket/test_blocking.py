@@ -11,7 +11,8 @@ import trio
 from serialsocket import BlockingSerialSocket, EndpointConfig, open_pty_pair
 
 GUARD = 30.0  # seconds; only stops a hang
-CFG = EndpointConfig(window=8)
+# dead_after: real threads on a shared machine may be starved for seconds.
+CFG = EndpointConfig(window=8, dead_after=60.0)
 
 
 def in_thread(fn: Callable[[], object]) -> Callable[[], object]:

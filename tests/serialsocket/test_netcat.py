@@ -51,7 +51,7 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     (tmp_path / "down").write_bytes(download)
     with (tmp_path / "down").open("rb") as down_in:
         server = subprocess.Popen(
-            cli("listen", b, "--delay", "0.002"),
+            cli("listen", b, "--delay", "0.002", "--dead-after", "60"),
             stdin=down_in,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -71,6 +71,8 @@ def test_files_both_ways_byte_exact_and_clean_exit(
                 "--trace",
                 "--connect-timeout",
                 "30",
+                "--dead-after",
+                "60",
             ),
             stdin=up_in,
             capture_output=True,
@@ -132,14 +134,18 @@ def test_dial_and_answer_through_emulated_modems() -> None:
         paths = json.loads(relay.stdout.readline())
         upload = bytes(range(256)) * 12
         server = subprocess.Popen(
-            cli("listen", paths["b"], "--answer"),
+            cli("listen", paths["b"], "--answer", "--dead-after", "60"),
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
         )
         time.sleep(0.5)  # the answering side resets its modem and waits for RING
         client = subprocess.run(
-            cli("connect", paths["a"], "--dial", "5551234", "--connect-timeout", "30"),
+            [
+                *cli("connect", paths["a"], "--dial", "5551234", "--connect-timeout", "30"),
+                "--dead-after",
+                "60",
+            ],
             input=upload,
             capture_output=True,
             timeout=GUARD,
