@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -31,3 +33,27 @@ def test_bench_pty_rejects_bad_sizes(capsys: pytest.CaptureFixture[str]) -> None
     _bench_pty.add_arguments(ap)
     assert _bench_pty.main(ap.parse_args(["--size", "0"])) == 2
     assert "--size and --runs must be >= 1" in capsys.readouterr().err
+
+
+def test_linksim_bench_pty_command() -> None:
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "linksim",
+            "bench",
+            "pty",
+            "--json",
+            "--size",
+            "4096",
+            "--runs",
+            "1",
+            "--max-len",
+            "256",
+        ],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+    report = json.loads(out.stdout)
+    assert [r["max_packet_length"] for r in report["results"]] == [256]
