@@ -8,7 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PKGS   := serialsocket tcpstream linksim
 
-.PHONY: demo test lint typecheck pytest fuzz bench-codec clean
+.PHONY: demo test lint typecheck pytest fuzz bench bench-codec bench-goodput bench-pty bench-latency clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,8 +34,22 @@ pytest: $(STAMP)
 fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=deep $(PY) -m pytest -q fuzz
 
+# Benchmarks measure speed; they are not tests.  `make bench` runs the quick ones.
+bench: bench-codec bench-pty bench-latency
+	$(PY) -m linksim bench goodput --quick
+
 bench-codec: $(STAMP)
 	$(PY) -m linksim bench codec
+
+bench-goodput: $(STAMP)
+	$(PY) -m linksim bench goodput --output bench/results/goodput.json \
+	  --plot-delay bench/results/goodput-delay.png --plot-ber bench/results/goodput-ber.png
+
+bench-pty: $(STAMP)
+	$(PY) -m linksim bench pty
+
+bench-latency: $(STAMP)
+	$(PY) -m linksim bench latency
 
 clean:
 	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache .hypothesis
