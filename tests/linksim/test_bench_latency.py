@@ -23,13 +23,20 @@ def test_bench_latency_json() -> None:
         timeout=120,
         check=True,
     )
-    report = json.loads(out.stdout)
+    reports = json.loads(out.stdout)
+    assert [r["transport"] for r in reports] == ["tcp", "serial"]
+    for report in reports:
+        check(report)
+
+
+def check(report: dict[str, object]) -> None:
     assert report["benchmark"] == "latency"
     assert report["count"] == 40
     assert report["packet_bytes"] == 216
     assert report["authenticated"] is False
     for side in ("command", "raw_echo"):
         figures = report[side]
+        assert isinstance(figures, dict)
         assert 0 < figures["min_us"] <= figures["p50_us"] <= figures["p99_us"]
     assert isinstance(report["target_p50_within_10x"], bool)
     assert isinstance(report["target_p99_under_2ms"], bool)
