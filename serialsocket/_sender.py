@@ -172,7 +172,11 @@ class Sender:
         if seq is None:
             if self.window == 1 and seq_mod == self.next % 64 and self.next - 1 in self.outstanding:
                 # Stop-and-wait: NAK(n+1) = ACK(n) (seed 003; Kermit ckcfn2.c input()).
+                # It also says the peer now expects n+1, exactly as an ACK's
+                # cumulative field would: without advancing peer_cum, room()
+                # stays 0 and nothing more is sent until a keepalive answer.
                 self._ack_one(self.next - 1, now, [])
+                self.peer_cum = max(self.peer_cum, self.next)
                 self._slide()
             return
         pkt = self.outstanding[seq]

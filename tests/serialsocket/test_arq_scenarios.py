@@ -244,6 +244,35 @@ def test_stop_and_wait_nak_of_next_packet_acknowledges_current() -> None:
     assert a.all_acknowledged
 
 
+def test_stop_and_wait_nak_of_next_packet_reopens_the_window() -> None:
+    # The ACK of packet 1 is lost, the timeout resend arrives damaged, and the
+    # receiver (already holding 1) NAKs 2.  NAK(2) = ACK(1) must also tell the
+    # sender the peer expects 2, or packet 2 waits for a keepalive probe
+    # (dead_after / 4 of silence) -- forever with dead_after very large.
+    cfg = EndpointConfig(one_way_delay=D, window=1, dead_after=10_000.0)
+    a, b, t = connected(cfg)
+    a.send(b"MOVE", t)
+    first = a.data_to_send(t)
+    assert first == data(1, b"MOVE")
+    b.receive_data(first, t + 1)
+    assert b.data_to_send(t + 1) == ack(1, 2, window=1)  # lost
+    assert b.read() == b"MOVE"
+    assert a.get_timer() == t + 6.0
+    a.handle_timer(t + 6.0)
+    resent = bytearray(a.data_to_send(t + 6.0))
+    assert bytes(resent) == first
+    resent[6] ^= 0x04
+    b.receive_data(bytes(resent), t + 7.0)
+    assert b.data_to_send(t + 7.0) == nak(2)
+    a.send(b"STOP", t + 8.0)
+    a.receive_data(nak(2), t + 8.0)
+    assert not a.all_acknowledged  # b"STOP" is queued; packet 1 is done
+    assert a.statistics().send_base == 2
+    assert a.data_to_send(t + 8.0) == data(2, b"STOP")  # at once, not after a probe
+    b.receive_data(data(2, b"STOP"), t + 9.0)
+    assert b.read() == b"STOP"
+
+
 def test_lost_data_packet_is_naked_and_resent_selectively() -> None:
     a, b, t = connected()
     out = []
