@@ -680,7 +680,7 @@ class Endpoint:
         elif ptype == PacketType.NAK:
             if self._state is State.ESTABLISHED:
                 self._counters["naks_received"] += 1
-                self._sender.on_nak(packet.seq, now, self._min_rtt())
+                self._sender.on_nak(packet.seq, now, self._nak_horizon())
         elif ptype in (PacketType.DATA, PacketType.EOF):
             if self._state in (State.ESTABLISHED, State.LINGER):
                 self._on_data(packet, now)
@@ -844,6 +844,22 @@ class Endpoint:
 
     def _min_rtt(self) -> float:
         return self.config.physical_rtt(self._full_wire)
+
+    def _nak_horizon(self) -> float:
+        """The least time from a copy leaving our UART to a NAK *about that copy*.
+
+        The copy's last byte reaches the peer one delay after it left our
+        UART (``done_at`` already includes its own transmit time); the peer can
+        reject it only then, and its NAK -- the shortest packet there is, with
+        the negotiated check -- needs its own transmit time and one more delay.
+        A NAK arriving sooner was provoked by an earlier copy and must not
+        cause another resend; one arriving later may be about this copy and is
+        honoured.  (The physical round trip of a full packet is too long by the
+        packet's own transmit time: it made every NAK for a damaged packet
+        arrive just too early, and stop-and-wait waited for the timeout.)
+        """
+        nak = len(build_packet(Packet(seq=0, type=PacketType.NAK), self._send_check))
+        return 2 * self.config.one_way_delay + self.config.transmit_time(nak) - _TIME_EPSILON
 
     def _effective_window(self) -> int:
         key = (self._sender.window, self._rtt.srtt, self._full_wire)

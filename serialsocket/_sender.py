@@ -18,7 +18,7 @@ A packet is acknowledged three ways:
 A packet is retransmitted when
 
 * its timer expires (deadline = moment it finished leaving the UART + timeout);
-* the peer NAKs it, unless our last copy cannot have reached the peer yet;
+* the peer NAKs it, unless the NAK came too soon to be about our last copy;
 * an ACK shows the peer holds a later packet but still expects this one
   (fast retransmit: a serial line never reorders, so the packet was lost).
 """
@@ -167,7 +167,15 @@ class Sender:
         return samples
 
     def on_nak(self, seq_mod: int, now: float, min_rtt: float) -> None:
-        """Apply a NAK: resend that packet unless our last copy is still on its way."""
+        """Apply a NAK: resend that packet unless our last copy is still on its way.
+
+        Args:
+            seq_mod: the NAK's sequence number.
+            now: arrival time.
+            min_rtt: the least time from a copy finishing leaving the UART to a
+                NAK provoked by that copy (two delays plus the NAK's transmit
+                time); a NAK sooner than that is about an earlier copy.
+        """
         seq = self.resolve(seq_mod)
         if seq is None:
             if self.window == 1 and seq_mod == self.next % 64 and self.next - 1 in self.outstanding:

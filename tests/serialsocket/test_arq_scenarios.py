@@ -273,6 +273,32 @@ def test_stop_and_wait_nak_of_next_packet_reopens_the_window() -> None:
     assert b.read() == b"STOP"
 
 
+def test_nak_for_a_damaged_packet_is_honoured_on_a_rate_limited_line() -> None:
+    # 2400 bit/s, 1 s each way: the 14-byte packet leaves the UART at t + 7/120;
+    # its last byte reaches B 1 s later; B's NAK (8 bytes with CRC-16, 1/30 s)
+    # reaches A one more second later.  That NAK is about this very copy and
+    # must be honoured at once.  A NAK arriving sooner can only be about an
+    # earlier copy and must not provoke another resend.
+    cfg = EndpointConfig(one_way_delay=D, line_rate=2400, window=1)
+    a, b, t = connected(cfg)
+    a.send(b"CLOSE", t)
+    pkt = a.data_to_send(t)
+    assert pkt == data(1, b"CLOSE")
+    done = t + len(pkt) * 10 / 2400
+    damaged = bytearray(pkt)
+    damaged[6] ^= 0x04
+    b.receive_data(bytes(damaged), done + D)
+    assert b.data_to_send(done + D) == nak(1)
+    nak_arrives = done + D + len(nak(1)) * 10 / 2400 + D
+    assert len(nak(1)) == 8
+    a.receive_data(nak(1), nak_arrives - 0.001)  # too soon: about an earlier copy
+    assert a.data_to_send(nak_arrives - 0.001) == b""
+    a.receive_data(nak(1), nak_arrives)
+    assert a.data_to_send(nak_arrives) == pkt
+    s = a.statistics()
+    assert (s.naks_received, s.retransmissions, s.timeouts) == (2, 1, 0)
+
+
 def test_lost_data_packet_is_naked_and_resent_selectively() -> None:
     a, b, t = connected()
     out = []
