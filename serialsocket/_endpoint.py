@@ -24,8 +24,9 @@ leaving the UART, so queueing never counts as loss.
 
 The effective window is the smallest of the negotiated window, the peer's
 advertised window, and the bandwidth-delay bound: the packets the line can
-carry in one round trip, plus a second round trip as margin for repairing a
-loss, plus two.
+carry in three round trips, plus five -- long enough that repairing a loss,
+even one whose first resend is lost too, never stalls the window (see
+``_compute_effective_window``).
 """
 
 from __future__ import annotations
@@ -873,12 +874,19 @@ class Endpoint:
         tx = self.config.transmit_time(self._full_wire)
         if tx <= 0:
             return window
-        rtt = self._rtt.srtt if self._rtt.srtt is not None else self._min_rtt()
-        # One round trip of packets keeps the line busy; a second round trip of
-        # margin lets a loss be NAKed and repaired (one more round trip) without
-        # the window stalling.  Pacing keeps the UART queue at two packets, so
-        # these packets are on the line, not piling up in a tty buffer.
-        bdp = math.ceil(2 * max(rtt, self._min_rtt()) / tx) + 2
+        rtt = max(self._rtt.srtt if self._rtt.srtt is not None else 0.0, self._min_rtt())
+        # The window must outlast the repair of a loss, or the line idles.
+        # Packet k (first sent from T - tx to T) is lost; the next packet's
+        # ACK and NAK reach us at T + tx + 2 x delay + tx(ACK); the resend
+        # waits behind at most two paced packets and leaves at T + 2 x delay +
+        # 4 tx + tx(ACK); its ACK returns 2 x delay + tx(ACK) later.  The
+        # window k..k+W-1 (plus the resend's own slot) keeps the line busy
+        # until T + W tx, so W tx >= 2 rtt + 2 tx.  If the resend is lost too,
+        # the next new packet's ACK reveals it (fast retransmit) one round
+        # trip and two packets later: 3 rtt + 4 tx.  One packet more absorbs
+        # reading in batches and rounding.  Pacing keeps the UART queue at
+        # two packets, so these packets are on the line, not in a tty buffer.
+        bdp = math.ceil(3 * rtt / tx) + 5
         return max(1, min(window, bdp))
 
     def _next_probe_time(self) -> float:

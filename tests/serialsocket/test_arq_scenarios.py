@@ -459,6 +459,28 @@ def test_zero_window_then_reopen() -> None:
     assert bytes(got) == payload
 
 
+def test_effective_window_covers_the_repair_horizon() -> None:
+    # 2400 bit/s, 1.3 s, 128-byte packets: tx = 129/240 = 0.5375 s; before any
+    # sample the round trip is the physical one, 2.6 + 139/240 = 3.179 s.
+    # ceil(3 x 3.179 / 0.5375) + 5 = 18 + 5 = 23 packets.
+    assert (
+        Endpoint(EndpointConfig(one_way_delay=1.3, line_rate=2400, window=31))
+        .statistics()
+        .effective_window
+        == 23
+    )
+    assert (
+        Endpoint(EndpointConfig(one_way_delay=1.3, line_rate=2400, window=16))
+        .statistics()
+        .effective_window
+        == 16
+    )
+    # Unknown rate: no bound but the window.
+    assert (
+        Endpoint(EndpointConfig(one_way_delay=1.3, window=31)).statistics().effective_window == 31
+    )
+
+
 def test_paced_output_on_a_slow_line() -> None:
     cfg = EndpointConfig(one_way_delay=1.3, line_rate=2400, window=31)
     a, b = Endpoint(cfg), Endpoint(cfg)
