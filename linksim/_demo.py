@@ -167,7 +167,7 @@ def client_link_figures(client: ArmClient) -> dict[str, Any]:
     return out
 
 
-def _goodput(figures: dict[str, Any], seconds: float) -> None:
+def add_goodput(figures: dict[str, Any], seconds: float) -> None:
     moved = int(figures.get("bytes_sent", 0)) + int(figures.get("bytes_received", 0))
     figures["goodput_Bps"] = round(moved / seconds, 1) if seconds > 0 else 0.0
 
@@ -200,7 +200,7 @@ async def drive(
         await run.run(client)
 
 
-def _title(options: DemoOptions, where: str) -> str:
+def run_title(options: DemoOptions, where: str) -> str:
     preset = options.preset or "custom link"
     return f"telelink demo: rock task over {options.transport} ({preset}, {where})"
 
@@ -213,7 +213,7 @@ async def _virtual_streams(
     options: DemoOptions,
 ) -> AsyncIterator[tuple[trio.abc.Stream, trio.abc.Stream, Callable[[], dict[str, Any]]]]:
     if options.transport == "serial":
-        ep = endpoint_config_for(options.link, **_endpoint_overrides(options))
+        ep = endpoint_config_for(options.link, **endpoint_overrides(options))
         async with serial_socket_pair(options.link, endpoint=ep) as (ctl, arm):
             yield ctl, arm, lambda: serial_link_figures(ctl)
         return
@@ -224,7 +224,7 @@ async def _virtual_streams(
         yield ctl, arm, dict
 
 
-def _endpoint_overrides(options: DemoOptions) -> dict[str, Any]:
+def endpoint_overrides(options: DemoOptions) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if options.window is not None:
         out["window"] = options.window
@@ -261,19 +261,19 @@ async def _run_virtual(options: DemoOptions) -> DemoReport:
                     incarnation=rng.getrandbits(64),
                     nonce_source=rng.randbytes,
                 ) as client:
-                    await drive(client, run, options, probe, _title(options, "virtual time"))
+                    await drive(client, run, options, probe, run_title(options, "virtual time"))
                     figures = probe() | client_link_figures(client)
             except (SessionError, trio.BrokenResourceError, OSError) as exc:
-                error = _explain(exc)
+                error = explain_failure(exc)
             nursery.cancel_scope.cancel()
     if scope.cancelled_caught:
         error = f"the run did not finish within {options.timeout:g} s of link time"
     seconds = trio.current_time() - start
-    _goodput(figures, seconds)
-    return _report(options, run, figures, seconds, error)
+    add_goodput(figures, seconds)
+    return make_report(options, run, figures, seconds, error)
 
 
-def _report(
+def make_report(
     options: DemoOptions,
     run: TaskRun | None,
     figures: dict[str, Any],
@@ -290,7 +290,7 @@ def _report(
     )
 
 
-def _explain(exc: BaseException) -> str:
+def explain_failure(exc: BaseException) -> str:
     cause = exc.__cause__
     text = str(exc) or type(exc).__name__
     if cause is not None and str(cause) and str(cause) not in text:

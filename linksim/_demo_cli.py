@@ -23,12 +23,12 @@ from ._demo import (
     IDENTITY,
     DemoOptions,
     DemoReport,
-    _endpoint_overrides,
-    _explain,
-    _goodput,
-    _report,
+    add_goodput,
     client_link_figures,
     drive,
+    endpoint_overrides,
+    explain_failure,
+    make_report,
     new_run,
     print_report,
     run_demo,
@@ -103,7 +103,7 @@ def demo_main(args: argparse.Namespace) -> int:
             timeout=args.timeout,
         )
         if args.window is not None or args.max_len is not None:
-            endpoint_config_for(link, **_endpoint_overrides(options))  # validate early
+            endpoint_config_for(link, **endpoint_overrides(options))  # validate early
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim demo: {exc}", file=sys.stderr)
         return 2
@@ -138,10 +138,10 @@ async def _control(options: DemoOptions, args: argparse.Namespace, key: bytes | 
     except trio.TooSlowError:
         error = f"the run did not finish within {options.timeout:g} s"
     except (SessionError, serialsocket.DialError, trio.BrokenResourceError, OSError) as exc:
-        error = _explain(exc)
+        error = explain_failure(exc)
     seconds = trio.current_time() - start
-    _goodput(figures, seconds)
-    return _report(options, run, figures, seconds, error)
+    add_goodput(figures, seconds)
+    return make_report(options, run, figures, seconds, error)
 
 
 async def _control_session(
@@ -157,7 +157,7 @@ async def _control_session(
             await drive(arm, run, options, lambda: client_link_figures(arm), title)
             figures.update(client_link_figures(arm))
     else:
-        endpoint = endpoint_config_for(options.link, **_endpoint_overrides(options))
+        endpoint = endpoint_config_for(options.link, **endpoint_overrides(options))
         port = await serialsocket.open_port(args.port, args.baud)
         if args.dial:
             await serialsocket.dial(port, args.dial)

@@ -35,14 +35,14 @@ from ._demo import (
     IDENTITY,
     DemoOptions,
     DemoReport,
-    _endpoint_overrides,
-    _explain,
-    _goodput,
-    _report,
-    _title,
+    add_goodput,
     client_link_figures,
     drive,
+    endpoint_overrides,
+    explain_failure,
+    make_report,
     new_run,
+    run_title,
     serial_link_figures,
 )
 from ._modem import ModemConfig, ModemPair
@@ -128,15 +128,15 @@ async def run_real(options: DemoOptions) -> DemoReport:
         OSError,
         ConnectionError,
     ) as exc:
-        error = _explain(exc)
+        error = explain_failure(exc)
     seconds = trio.current_time() - start
     figures: dict[str, Any] = holder.get("figures", {})
     relay: RelayStatistics | None = holder.get("relay")
     if relay is not None:
         figures["line"] = _line_figures(relay)
-    _goodput(figures, seconds)
+    add_goodput(figures, seconds)
     run: TaskRun | None = holder.get("run")
-    return _report(options, run, figures, seconds, error)
+    return make_report(options, run, figures, seconds, error)
 
 
 def _line_figures(stats: RelayStatistics) -> dict[str, Any]:
@@ -159,7 +159,7 @@ async def _tcp(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> None
         async with connect_tcp("127.0.0.1", port, identity=IDENTITY, key=key) as client:
             holder["run"] = run = new_run(options)
             probe = lambda: client_link_figures(client)  # noqa: E731
-            await drive(client, run, options, probe, _title(options, "loopback"))
+            await drive(client, run, options, probe, run_title(options, "loopback"))
             holder["figures"] = client_link_figures(client)
 
 
@@ -167,7 +167,7 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
     link = options.link
     rate = link.a_to_b.rate
     baud = int(rate) if rate is not None else 115200
-    endpoint = endpoint_config_for(link, **_endpoint_overrides(options))
+    endpoint = endpoint_config_for(link, **endpoint_overrides(options))
     modems = ModemPair(ModemConfig(connect_rate=baud)) if options.dial else None
     stop = trio.Event()
     async with trio.open_nursery() as nursery:
@@ -196,7 +196,7 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
                             run,
                             options,
                             lambda: serial_link_figures(sock),
-                            _title(options, "real time, ptys"),
+                            run_title(options, "real time, ptys"),
                         )
                         holder["figures"] = serial_link_figures(sock) | client_link_figures(client)
                 finally:
