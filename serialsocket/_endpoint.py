@@ -178,7 +178,12 @@ class Endpoint:
         self._full_wire = cfg.max_packet_length + 1
         self._rtt = RttEstimator(
             floor=self._timeout_floor(cfg.max_packet_length, cfg.max_packet_length),
-            ceiling=max(60.0, 8 * cfg.initial_timeout()),
+            # Backoff stops at a minute (or 8 initial timeouts on slower paths),
+            # and at half of dead_after: then within any dead_after of silence
+            # a copy leaves with half of it to spare for its answer, so the
+            # verdict needs a copy that had ample time and still went
+            # unanswered, not merely a timer that outgrew the liveness clock.
+            ceiling=min(max(60.0, 8 * cfg.initial_timeout()), cfg.derived_dead_after() / 2),
             initial=cfg.initial_timeout(),
         )
         self._counters: dict[str, int] = dict.fromkeys(
@@ -681,7 +686,10 @@ class Endpoint:
         elif ptype == PacketType.NAK:
             if self._state is State.ESTABLISHED:
                 self._counters["naks_received"] += 1
+                acked = self._sender.packets_acked
                 self._sender.on_nak(packet.seq, now, self._nak_horizon())
+                if self._sender.packets_acked > acked:  # stop-and-wait NAK(n+1) = ACK(n)
+                    self._rtt.on_progress()
         elif ptype in (PacketType.DATA, PacketType.EOF):
             if self._state in (State.ESTABLISHED, State.LINGER):
                 self._on_data(packet, now)
@@ -693,8 +701,11 @@ class Endpoint:
         cum = unchar(data[0]) % 64 if len(data) >= 1 else None
         window = min(max(unchar(data[1]), 0), 31) if len(data) >= 2 else None
         before = set(self._sender.retransmit)
+        acked = self._sender.packets_acked
         for rtt in self._sender.on_ack(packet.seq, cum, window, now):
             self._rtt.sample(rtt)
+        if self._sender.packets_acked > acked:
+            self._rtt.on_progress()
         if set(self._sender.retransmit) - before:
             self._counters["fast_retransmits"] += 1
         if len(data) >= 3 and data[2] == _POLL:

@@ -25,7 +25,7 @@ class RttEstimator:
 
     Attributes:
         floor: the least timeout ever used (physical round trip + margin).
-        ceiling: the most backoff may reach.
+        ceiling: the most backoff may reach (the floor still wins over it).
         initial: the timeout before any sample.
     """
 
@@ -47,6 +47,17 @@ class RttEstimator:
             self.rttvar = (1 - _BETA) * self.rttvar + _BETA * abs(self.srtt - rtt)
             self.srtt = (1 - _ALPHA) * self.srtt + _ALPHA * rtt
         self.samples += 1
+        self.backoff = 0
+
+    def on_progress(self) -> None:
+        """New data was acknowledged: the line works again, so drop the backoff.
+
+        Karn's rule keeps a retransmitted packet's ACK from giving a *sample*,
+        but not from proving that the path delivers: on a noisy serial line a
+        timeout means a damaged packet, not congestion, and a backoff carried
+        over to the next packet only delays its repair (and, stacked, outgrows
+        ``dead_after``).  The estimate itself is untouched.
+        """
         self.backoff = 0
 
     def on_timeout(self) -> None:

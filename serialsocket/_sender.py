@@ -73,6 +73,7 @@ class Sender:
         self.eof_sent = False
         self.eof_acked = False
         self.bytes_acked = 0
+        self.packets_acked = 0
         self.bytes_in_flight = 0
 
     # -- application side ----------------------------------------------------------
@@ -198,6 +199,7 @@ class Sender:
         if pkt is None or pkt.acked:
             return
         pkt.acked = True
+        self.packets_acked += 1
         self.bytes_acked += pkt.payload
         self.bytes_in_flight -= pkt.payload
         if pkt.transmissions == 1 and pkt.deadline is not None:

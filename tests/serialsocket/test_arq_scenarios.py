@@ -360,6 +360,45 @@ def test_lost_ack_times_out_resends_and_is_reacked_without_duplicate_delivery() 
     assert sa.smoothed_rtt == 2.0  # Karn: no sample from the retransmitted packet
 
 
+def test_an_ack_of_a_resent_packet_clears_the_backoff() -> None:
+    a, b, t = connected()
+    a.send(b"one", t)
+    p1 = a.data_to_send(t)  # lost
+    assert a.get_timer() == t + 6.0
+    a.handle_timer(t + 6.0)
+    assert a.data_to_send(t + 6.0) == p1
+    assert a.get_timer() == t + 6.0 + 12.0  # backed off
+    b.receive_data(p1, t + 7.0)
+    a.receive_data(b.data_to_send(t + 7.0), t + 8.0)
+    assert a.all_acknowledged
+    assert a.statistics().smoothed_rtt == 2.0  # Karn: no sample from a resent packet...
+    a.send(b"two", t + 8.0)
+    assert a.data_to_send(t + 8.0) == data(2, b"two")
+    assert a.get_timer() == t + 8.0 + 6.0  # ...but the next packet's timer is not backed off
+    assert a.statistics().timeout == 6.0
+
+
+def test_backoff_stops_at_half_of_dead_after() -> None:
+    # dead_after 20 s: the ceiling is 10 s (not 60), so timers run 6, 10, 10 and
+    # a copy always leaves with half of dead_after left for its answer.
+    a, _b, t = connected(EndpointConfig(one_way_delay=D, window=4, dead_after=20.0))
+    a.send(b"one", t)
+    p1 = a.data_to_send(t)
+    deadlines = []
+    now = t
+    while a.state is State.ESTABLISHED:  # every copy is lost
+        timer = a.get_timer()
+        assert timer is not None
+        deadlines.append(timer - now)
+        now = timer
+        a.handle_timer(now)
+        if a.state is State.ESTABLISHED:
+            assert a.data_to_send(now) == p1
+    assert deadlines == [6.0, 10.0, 4.0]  # the third timer is the dead-link verdict
+    assert now == t + 20.0
+    assert a.statistics().timeouts == 2
+
+
 def test_lost_ack_is_healed_by_a_later_cumulative_ack() -> None:
     a, _b, t = connected()
     a.send(b"a", t)
