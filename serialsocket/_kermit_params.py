@@ -1,0 +1,295 @@
+"""Kermit file transfer: the Send-Init fields real Kermits exchange, and their negotiation.
+
+The layout is the one in reference/kermit.md section 4 (and
+:mod:`serialsocket._params`, whose decoder walks the CAPAS/WINDO/MAXLX part for
+us).  :class:`~serialsocket.InitParameters` cannot be reused for *encoding*:
+it pins telelink's own SYSID and trailing fields and always offers long
+packets and windows, while a file-transfer peer must see exactly what we
+support (attributes, binary WHATAMI, long packets only when configured) and we
+need the fields telelink's connection protocol ignores (TIME, NPAD, PADC, EOL).
+
+Our S / ACK(S) data field::
+
+    MAXL TIME NPAD PADC EOL QCTL QBIN CHKT REPT CAPAS WINDO MAXLX1 MAXLX2
+    CHKPNT CHKINT(3) WHATAMI
+
+WHATAMI carries 32 (valid) | 2 (binary mode) and never 8 (we never offer
+streaming: any error while streaming is fatal by design, wrong for an impaired
+serial line).  No SYSID is sent, so peers apply no system-specific conversions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ._checks import BlockCheck
+from ._encoding import Encoding
+from ._errors import LocalProtocolError, RemoteProtocolError
+from ._params import InitParameters
+from ._wire import MAX_NORMAL_LEN, MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
+
+__all__ = ["KermitConfig", "KermitInit", "KermitNegotiated", "negotiate_kermit"]
+
+_CAP_LONG, _CAP_WINDOWS, _CAP_ATTRIBUTES = 2, 4, 8
+_WHATAMI_VALID, _WHATAMI_BINARY = 32, 2
+_NORMAL_PACKET = MAX_NORMAL_LEN + 2
+"""96: the longest normal packet, MARK through CHECK (LEN = 94)."""
+MAX_KERMIT_WINDOW = 31
+"""The window field is one tochar; 31 is the protocol's limit (E-Kermit P_WSLOTS, ckcker.h)."""
+_DEFAULT_PEER_TIMEOUT = 7.0
+"""Seconds we use when neither --timeout nor the peer's TIME says otherwise (G-Kermit's TIME)."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class KermitConfig:
+    """Local settings of a Kermit file transfer.
+
+    Attributes:
+        max_packet_length: longest packet we receive and send, MARK through
+            CHECK (the package's length convention).  96 or less means normal
+            packets only; more offers long packets (MAXLX = length - 7).
+        window: sliding-window slots we offer, 1..31.
+        check: block check we ask for after the Send-Init exchange (type 1, 2
+            or 3; both sides must ask for the same, else type 1 is used).
+        timeout: fixed local timeout in seconds, or None to use the time the
+            peer asks for in its TIME field.  On delayed links set it above the
+            round trip of a full window.
+        retry_limit: retransmissions of one packet before giving up with an E
+            packet; 0 means no limit.  Raised to window + 1 when smaller, as
+            C-Kermit and E-Kermit do.
+        seven_bit: the line carries 7 bits only: ask for 8th-bit prefixing.
+        repeat: offer repeat-count compression (``~``).
+        attributes: offer attribute (A) packets (file size, binary type).
+    """
+
+    max_packet_length: int = 1000
+    window: int = 8
+    check: BlockCheck = BlockCheck.CRC16
+    timeout: float | None = None
+    retry_limit: int = 10
+    seven_bit: bool = False
+    repeat: bool = True
+    attributes: bool = True
+
+    def __post_init__(self) -> None:
+        if not MIN_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
+            raise LocalProtocolError(
+                f"packet length {self.max_packet_length} is outside "
+                f"{MIN_PACKET_LENGTH}..{MAX_PACKET_LENGTH}: choose e.g. 96 or 1000"
+            )
+        if not 1 <= self.window <= MAX_KERMIT_WINDOW:
+            raise LocalProtocolError(f"window {self.window} is outside 1..{MAX_KERMIT_WINDOW}")
+        if self.timeout is not None and not 0 < self.timeout < 86400:
+            raise LocalProtocolError(f"timeout {self.timeout} s must be > 0 and below a day")
+        if self.retry_limit < 0:
+            raise LocalProtocolError("retry limit must be >= 0 (0 = no limit)")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class KermitInit:
+    """One side's Send-Init fields, decoded.
+
+    Attributes:
+        max_packet_length: longest packet this side receives, MARK through CHECK.
+        timeout: seconds the other side should wait for this side's packets (TIME).
+        npad, padc: padding this side needs before each packet.
+        eol: the byte this side wants after each packet.
+        qctl: the control prefix this side sends.
+        qbin: ``Y``, ``N`` or the 8th-bit prefix this side wants.
+        check: block check this side asks for (1, 2 or 3).
+        rept: repeat prefix proposed, or None.
+        long_packets, windows, attributes: CAPAS bits.
+        window: window slots offered (1 without the windows capability).
+    """
+
+    max_packet_length: int
+    timeout: float
+    npad: int
+    padc: int
+    eol: int
+    qctl: int
+    qbin: int
+    check: BlockCheck
+    rept: int | None
+    long_packets: bool
+    windows: bool
+    attributes: bool
+    window: int
+
+    @classmethod
+    def mine(cls, config: KermitConfig) -> KermitInit:
+        """What a side with this configuration offers."""
+        long_packets = config.max_packet_length > _NORMAL_PACKET
+        return cls(
+            max_packet_length=config.max_packet_length,
+            timeout=config.timeout if config.timeout is not None else _DEFAULT_PEER_TIMEOUT,
+            npad=0,
+            padc=0,
+            eol=0x0D,
+            qctl=ord("#"),
+            qbin=ord("&") if config.seven_bit else ord("Y"),
+            check=config.check,
+            rept=ord("~") if config.repeat else None,
+            long_packets=long_packets,
+            windows=config.window > 1,
+            attributes=config.attributes,
+            window=config.window,
+        )
+
+    def encode(self) -> bytes:
+        """The S / ACK(S) data field: printable, sent without prefix encoding."""
+        caps = (
+            (_CAP_LONG if self.long_packets else 0)
+            | (_CAP_WINDOWS if self.windows else 0)
+            | (_CAP_ATTRIBUTES if self.attributes else 0)
+        )
+        n = min(self.max_packet_length - 7, 94 * 95 + 94)
+        return bytes(
+            [
+                tochar(min(MAX_NORMAL_LEN, self.max_packet_length - 2)),
+                tochar(min(94, max(1, round(self.timeout)))),
+                tochar(self.npad),
+                ctl(self.padc),
+                tochar(self.eol),
+                self.qctl,
+                self.qbin,
+                ord(str(int(self.check))),
+                self.rept if self.rept is not None else 32,
+                tochar(caps),
+                tochar(self.window),
+                tochar(n // 95),
+                tochar(n % 95),
+                ord("0"),
+                *b"___",
+                tochar(_WHATAMI_VALID | _WHATAMI_BINARY),
+            ]
+        )
+
+    @classmethod
+    def decode(cls, data: bytes) -> KermitInit:
+        """Parse a peer's S or ACK(S) field; missing trailing fields take Kermit defaults.
+
+        Raises:
+            RemoteProtocolError: a field is out of range (``error_hint`` is the
+                E-packet text).
+        """
+        common = InitParameters.decode(data)  # MAXL, QCTL, QBIN, CHKT, REPT, CAPAS..MAXLX
+
+        def at(i: int, default: int) -> int:
+            return data[i] if i < len(data) else default
+
+        caps = unchar(at(9, 32))
+        eol = unchar(at(4, tochar(13)))
+        if not 1 <= eol <= 31:
+            eol = 13  # C-Kermit accepts 1..31, otherwise CR (ckcfns.c spar).
+        npad = unchar(at(2, 32))
+        if not 0 <= npad <= 94:
+            raise RemoteProtocolError(
+                f"Send-Init: bad NPAD in {data!r}", error_hint="Bad init field: NPAD"
+            )
+        qctl = common.qctl
+        if not (33 <= qctl <= 62 or 96 <= qctl <= 126):
+            raise RemoteProtocolError(
+                f"Send-Init: bad QCTL in {data!r}", error_hint="Bad init field: QCTL"
+            )
+        long_packets = bool(caps & _CAP_LONG) and caps >= 0
+        return cls(
+            max_packet_length=common.max_packet_length,
+            timeout=float(max(0, unchar(at(1, tochar(0))))),
+            npad=npad,
+            padc=ctl(at(3, ctl(0))),
+            eol=eol,
+            qctl=qctl,
+            qbin=common.qbin,
+            check=common.check,
+            rept=common.rept,
+            long_packets=long_packets,
+            windows=caps >= 0 and bool(caps & _CAP_WINDOWS),
+            attributes=caps >= 0 and bool(caps & _CAP_ATTRIBUTES),
+            window=common.window,
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class KermitNegotiated:
+    """The parameters both sides use after the Send-Init exchange.
+
+    Attributes:
+        send_max_length: longest packet we send (MARK through CHECK): the
+            smaller of our configured length and what the peer accepts.
+        window: the smaller window offer (1 unless both have the capability).
+        check: block check on every packet after the exchange.
+        send_encoding: prefixes we use (our QCTL, the agreed QBIN and REPT).
+        receive_encoding: prefixes the peer uses (its QCTL).
+        attributes: both sides do A packets.
+        timeout: our timeout, seconds (local override, else the peer's TIME).
+        retry_limit: retries per packet, 0 = unlimited.
+        eol, padding: what to put after and before each packet we send.
+    """
+
+    send_max_length: int
+    window: int
+    check: BlockCheck
+    send_encoding: Encoding
+    receive_encoding: Encoding
+    attributes: bool
+    timeout: float
+    retry_limit: int
+    eol: int
+    padding: bytes
+
+
+def negotiate_kermit(
+    config: KermitConfig, mine: KermitInit, theirs: KermitInit
+) -> KermitNegotiated:
+    """Combine the two Send-Init fields (both sides reach the same answer).
+
+    Raises:
+        RemoteProtocolError: we need 8th-bit prefixing (a 7-bit line) and the
+            peer refuses it, or the peer's prefixes collide.
+    """
+    check = mine.check if mine.check == theirs.check else BlockCheck.SUM6
+    qbin: int | None = None
+    for want, other in ((mine.qbin, theirs.qbin), (theirs.qbin, mine.qbin)):
+        if want not in b"YN" and (other == ord("Y") or other == want):
+            qbin = want
+    if mine.qbin not in b"YN" and qbin is None:
+        raise RemoteProtocolError(
+            "the line is 7-bit but the peer refuses 8th-bit prefixing",
+            error_hint="8th-bit prefixing refused: a 7-bit line cannot carry the data",
+        )
+    if qbin is not None and not (33 <= qbin <= 62 or 96 <= qbin <= 126):
+        qbin = None  # an illegal QBIN char means "none" (ckcfns.c spar)
+    rept = mine.rept if mine.rept is not None and mine.rept == theirs.rept else None
+    try:
+        send_encoding = Encoding(qctl=mine.qctl, qbin=qbin, rept=rept)
+        receive_encoding = Encoding(qctl=theirs.qctl, qbin=qbin, rept=rept)
+    except LocalProtocolError as exc:
+        raise RemoteProtocolError(
+            f"the peer's prefix characters collide: {exc}",
+            error_hint="Prefix characters collide",
+        ) from exc
+    if mine.long_packets and theirs.long_packets:
+        peer_max = theirs.max_packet_length
+    else:
+        # Normal packets only: the peer's MAXL is a LEN, our lengths count MARK and LEN too.
+        peer_max = min(theirs.max_packet_length, _NORMAL_PACKET)
+    window = min(mine.window, theirs.window) if mine.windows and theirs.windows else 1
+    retry_limit = config.retry_limit
+    if retry_limit and retry_limit < window + 1:
+        retry_limit = window + 1
+    timeout = config.timeout
+    if timeout is None:
+        timeout = theirs.timeout if theirs.timeout > 0 else _DEFAULT_PEER_TIMEOUT
+    return KermitNegotiated(
+        send_max_length=max(MIN_PACKET_LENGTH, min(config.max_packet_length, peer_max)),
+        window=window,
+        check=check,
+        send_encoding=send_encoding,
+        receive_encoding=receive_encoding,
+        attributes=mine.attributes and theirs.attributes,
+        timeout=timeout,
+        retry_limit=retry_limit,
+        eol=theirs.eol,
+        padding=bytes([theirs.padc]) * theirs.npad,
+    )
