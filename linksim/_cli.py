@@ -1,4 +1,5 @@
-"""The ``linksim`` command: ``demo``, ``arm-server``, ``control``, ``relay`` and ``bench``."""
+"""The ``linksim`` command: ``demo``, ``arm-server``, ``control``, ``console``, ``plot``,
+``relay`` and ``bench``."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from . import (
     _bench_latency,
     _bench_pty,
     _bench_relay,
+    _console_cli,
     _demo_cli,
 )
 from ._config import PRESETS, ConfigError, DirectionConfig, GilbertElliott, LinkConfig, Outage
@@ -247,6 +249,15 @@ def build_parser() -> argparse.ArgumentParser:
     control = sub.add_parser("control", help="run the rock task against a linksim arm-server")
     _demo_cli.add_control_arguments(control)
     control.set_defaults(func=_demo_cli.control_main)
+    console = sub.add_parser(
+        "console",
+        help="operator console: preview, predicted vs confirmed state, queue, link, log",
+    )
+    _console_cli.add_console_arguments(console)
+    console.set_defaults(func=_console_cli.console_main)
+    plot = sub.add_parser("plot", help="joint trajectories of a console --log file (PNG)")
+    _console_cli.add_plot_arguments(plot)
+    plot.set_defaults(func=_console_cli.plot_main)
     return ap
 
 

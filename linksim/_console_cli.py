@@ -1,0 +1,136 @@
+"""``linksim console`` and ``linksim plot``: argument parsing and exit status.
+
+Exit status of ``console``: 0 when every command completed (an observer:
+when the watched session ended or the timeout passed), 1 when the run
+failed or ``--require-preview`` refused the plan, 2 for bad options.
+``plot``: 0 when the PNG was written, 1 when it could not be (no
+matplotlib, an empty or malformed log).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import serialsocket
+
+from ._armserver import _read_key
+from ._config import ConfigError, DirectionConfig, LinkConfig
+from ._console_run import ConsoleOptions, run_console
+from ._demo import DemoOptions
+from ._world import DEFAULT_WORLD, WorldConfig
+
+__all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
+
+
+def add_console_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim console`` (those of ``linksim control``, plus the console's)."""
+    from ._cli import add_link_arguments
+
+    add_link_arguments(ap)
+    ap.add_argument("--transport", choices=["serial", "tcp"], default="serial")
+    ap.add_argument(
+        "--virtual",
+        "--demo",
+        action="store_true",
+        help="arm server, impaired link (--preset, default noisy-moon) and console in one "
+        "process on a virtual clock: instant, deterministic",
+    )
+    ap.add_argument("--observer", action="store_true", help="watch an arm (tcp); send nothing")
+    ap.add_argument("--task", choices=["rock"], default="rock", help="the command list to drive")
+    ap.add_argument(
+        "--require-preview",
+        action="store_true",
+        help="send nothing if the local model predicts a refusal",
+    )
+    ap.add_argument("--log", metavar="FILE", help="write every state and command event (JSONL)")
+    ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument("--port", help="serial device or pty path (serial transport)")
+    ap.add_argument("--baud", type=int, default=9600, help="line rate, bit/s (default 9600)")
+    ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
+    ap.add_argument("--host", default="127.0.0.1", help="arm server address (tcp)")
+    ap.add_argument("--tcp-port", type=int, default=7010, help="arm server port (tcp)")
+    ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
+    ap.add_argument("--plain", action="store_true", help="line output even on a terminal")
+    ap.add_argument("--json", action="store_true", help="print a final summary as JSON")
+    ap.add_argument("--timeout", type=float, default=600.0, help="give up after this many s")
+
+
+def console_main(args: argparse.Namespace) -> int:
+    """``linksim console``."""
+    from ._cli import config_from_args
+
+    try:
+        world = WorldConfig.from_toml(args.world) if args.world else DEFAULT_WORLD
+        key = _read_key(args.key_file) if args.key_file else None
+        if args.observer and (args.virtual or args.require_preview):
+            raise ConfigError(
+                "--observer watches a running arm: not with --virtual/--require-preview"
+            )
+        if args.virtual:
+            if args.config is None and args.preset is None:
+                args.preset = "noisy-moon"
+            link = config_from_args(args)
+            preset = args.preset if args.config is None else str(args.config)
+        else:
+            if args.transport == "serial" and not args.port:
+                raise ConfigError("--port PATH is needed for the serial transport")
+            rate = args.baud if args.transport == "serial" else None
+            link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay or 0.0))
+            preset = None
+        demo = DemoOptions(
+            link=link,
+            preset=preset,
+            transport=args.transport,
+            virtual=args.virtual,
+            world=world,
+            key=key,
+            live=False if args.plain else None,
+            timeout=args.timeout,
+        )
+        options = ConsoleOptions(
+            demo,
+            observer=args.observer,
+            require_preview=args.require_preview,
+            log=args.log,
+            host=args.host,
+            tcp_port=args.tcp_port,
+            port=args.port,
+            baud=args.baud,
+            dial=args.dial,
+        )
+    except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
+        print(f"linksim console: {exc}", file=sys.stderr)
+        return 2
+    try:
+        result = run_console(options)
+    except KeyboardInterrupt:
+        print("linksim console: interrupted", file=sys.stderr)
+        return 1
+    if args.json:
+        json.dump(result.as_dict(), sys.stdout)
+        sys.stdout.write("\n")
+    if result.error:
+        print(f"linksim console: {result.error}", file=sys.stderr)
+    return 0 if result.ok else 1
+
+
+def add_plot_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim plot``."""
+    ap.add_argument("log", metavar="FILE", help="a telemetry log written by linksim console --log")
+    ap.add_argument("--out", required=True, metavar="PNG", help="the image to write")
+
+
+def plot_main(args: argparse.Namespace) -> int:
+    """``linksim plot FILE --out PNG``."""
+    from ._plot import PlotUnavailable
+    from ._plot_log import plot_log
+
+    try:
+        path = plot_log(args.log, args.out)
+    except (PlotUnavailable, ValueError, OSError) as exc:
+        print(f"linksim plot: {exc}", file=sys.stderr)
+        return 1
+    print(path, file=sys.stderr)
+    return 0
