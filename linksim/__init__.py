@@ -11,6 +11,12 @@
   server calls; :func:`rock_task`: seed 000's task script.
 * :func:`run_demo` (``linksim demo``), :class:`TaskRun`: a task script run
   pipelined through an arm client, with a record of every command.
+* The operator console (``linksim console``): :func:`preview` plays commands
+  on a local copy of the arm (:class:`PreviewReport`); :class:`Predictor`
+  keeps the predicted state ahead of the confirmed one and records
+  :class:`Divergence`; :class:`ConsoleSession` / :class:`ConsoleSnapshot`
+  draw it; :class:`TelemetryLog` / :func:`read_log` write and read the
+  JSON-lines log (``linksim plot``).
 """
 
 from ._arm import ArmStatistics, SimulatedArm
@@ -25,6 +31,8 @@ from ._config import (
     Outage,
     ScriptedFault,
 )
+from ._console import ConsoleSession, ConsoleSnapshot
+from ._console_run import ConsoleOptions, ConsoleResult, run_console
 from ._control import CommandRecord, CommandState, TaskRun
 from ._demo import DemoOptions, DemoReport, run_demo
 from ._impair import DirectionStatistics, LinkDirection
@@ -38,8 +46,11 @@ from ._modem import (
     ModemStateError,
 )
 from ._pair import endpoint_config_for, serial_socket_pair
+from ._predict import Divergence, Predictor
+from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
 from ._relay import RelayStatistics, run_relay
 from ._tasks import RockTask, rock_task
+from ._telemetry_log import TelemetryLog, read_log
 from ._world import DEFAULT_WORLD, ObjectSpec, ObstacleSpec, WorldConfig
 
 __all__ = [
@@ -53,10 +64,15 @@ __all__ = [
     "CommandRecord",
     "CommandState",
     "ConfigError",
+    "ConsoleOptions",
+    "ConsoleResult",
+    "ConsoleSession",
+    "ConsoleSnapshot",
     "DemoOptions",
     "DemoReport",
     "DirectionConfig",
     "DirectionStatistics",
+    "Divergence",
     "FaultAction",
     "GilbertElliott",
     "ImpairedLink",
@@ -64,6 +80,7 @@ __all__ = [
     "LinkDirection",
     "LinkEnd",
     "LinkStatistics",
+    "ModelState",
     "ModemConfig",
     "ModemPair",
     "ModemState",
@@ -71,15 +88,22 @@ __all__ = [
     "ObjectSpec",
     "ObstacleSpec",
     "Outage",
+    "PredictedOutcome",
+    "Predictor",
+    "PreviewReport",
     "RelayStatistics",
     "RockTask",
     "ScriptedFault",
     "SimulatedArm",
     "TaskRun",
+    "TelemetryLog",
     "WorldConfig",
     "endpoint_config_for",
     "open_impaired_link",
+    "preview",
+    "read_log",
     "rock_task",
+    "run_console",
     "run_demo",
     "run_relay",
     "serial_socket_pair",
