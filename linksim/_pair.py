@@ -7,7 +7,6 @@ match it, as a user would configure them for a real line.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -25,23 +24,20 @@ __all__ = ["endpoint_config_for", "serial_socket_pair"]
 def endpoint_config_for(link: LinkConfig, **overrides: Any) -> EndpointConfig:
     """An endpoint configuration matching the line: its delay and rate, plus overrides.
 
-    On a rate-limited line the send buffer is sized to what the line carries
-    in one round trip (at least two full packets), not the 64 KiB default:
-    at 2400 bit/s 64 KiB is four and a half minutes of queue, and a command
-    (an emergency stop!) written behind it would wait that long.  A buffer of
-    one round trip keeps the line busy and lets ``send_all`` push back, so a
-    writer such as the command session's telemetry sees the line is busy.
+    Everything else is serialsocket's default, derived from those facts: on a
+    rate-limited line the send buffer is what the line carries in one round
+    trip (at least two full packets; see
+    :meth:`~serialsocket.EndpointConfig.derived_send_buffer`), so a command
+    (an emergency stop!) never waits behind minutes of queue and a writer such
+    as the command session's telemetry sees the line is busy.
     """
     d = link.a_to_b
-    base = EndpointConfig(
-        one_way_delay=d.delay + d.jitter, line_rate=d.rate, bits_per_char=d.bits_per_char
+    return EndpointConfig(
+        one_way_delay=d.delay + d.jitter,
+        line_rate=d.rate,
+        bits_per_char=d.bits_per_char,
+        **overrides,
     )
-    if d.rate is not None:
-        round_trip = 2 * (d.delay + d.jitter)
-        per_second = d.rate / d.bits_per_char
-        length = overrides.get("max_packet_length", base.max_packet_length)
-        base = dataclasses.replace(base, send_buffer=max(2 * length, int(per_second * round_trip)))
-    return dataclasses.replace(base, **overrides)
 
 
 @asynccontextmanager

@@ -29,6 +29,10 @@ MIN_ENDPOINT_PACKET_LENGTH = 33
 receive it, so no endpoint may announce less (MIN_PACKET_LENGTH bounds the
 packet layer alone)."""
 
+_UNKNOWN_RATE_SEND_BUFFER = 64 * 1024
+"""Send buffer when the line rate is unknown: a fast line (pty, TCP tunnel)
+drains it in milliseconds, and large writes need few wake-ups."""
+
 _ACK_WIRE = 10
 """Wire bytes of an ACK (MARK LEN SEQ TYPE + 2 data + 3 CRC + CR)."""
 
@@ -41,7 +45,13 @@ class EndpointConfig:
         max_packet_length: largest packet this side receives, MARK through
             CHECK (default 128, the paper's packet size).  The peer's value
             bounds what this side sends.
-        window: window in packets, 1..31.  1 is the paper's stop-and-wait.
+        window: window in packets, 1..31 (default 31, the most the mod-64
+            sequence numbers allow).  1 is the paper's stop-and-wait.  The
+            sender never has more unacknowledged packets than the line
+            carries in its repair horizon (the bandwidth-delay bound, see
+            PROTOCOL.md 4.6), so a wide window never over-commits a short or
+            slow line, while a narrow one starves a long fast one (16 at
+            9600 bit/s, 1.3 s keeps the line busy 78 % of the time).
         check: block check asked for (CRC-16 by default).
         encoding: prefix profile; PRINTABLE asks for 8th-bit prefixing so the
             line carries only printable ASCII plus SOH and CR.
@@ -56,7 +66,9 @@ class EndpointConfig:
             (in order, unread) plus out-of-order packets.  When full, the
             advertised window closes; nothing is dropped that is not resent.
         send_buffer: bytes the application may queue beyond what is in flight;
-            ``send`` accepts less when it is full (back-pressure).
+            ``send`` accepts less when it is full (back-pressure).  None
+            derives it (:meth:`derived_send_buffer`): what the line carries in
+            one round trip when the rate is known, else 64 KiB.
         connect_timeout: give up connecting after this many seconds; None
             derives it: 10 x the initial timeout.
         dead_after: declare the link dead after this much silence while
@@ -73,14 +85,14 @@ class EndpointConfig:
     """
 
     max_packet_length: int = DEFAULT_MAX_PACKET_LENGTH
-    window: int = 16
+    window: int = MAX_WINDOW
     check: BlockCheck = BlockCheck.CRC16
     encoding: Encoding = field(default=PRINTABLE)
     one_way_delay: float = 0.0
     line_rate: float | None = None
     bits_per_char: int = 10
     receive_buffer: int = 64 * 1024
-    send_buffer: int = 64 * 1024
+    send_buffer: int | None = None
     connect_timeout: float | None = None
     dead_after: float | None = None
     max_retries: int | None = None
@@ -110,8 +122,8 @@ class EndpointConfig:
             raise bad("bits_per_char", self.bits_per_char, "5..16 (8N1 = 10)")
         if self.receive_buffer < 2 * MAX_PACKET_LENGTH:
             raise bad("receive_buffer", self.receive_buffer, f">= {2 * MAX_PACKET_LENGTH}")
-        if self.send_buffer < 1:
-            raise bad("send_buffer", self.send_buffer, ">= 1")
+        if self.send_buffer is not None and self.send_buffer < 1:
+            raise bad("send_buffer", self.send_buffer, "None (derived) or >= 1")
         for name in ("connect_timeout", "dead_after", "linger"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
@@ -154,6 +166,24 @@ class EndpointConfig:
     def derived_dead_after(self) -> float:
         """``dead_after`` or its derived default."""
         return self.dead_after or max(10 * self.initial_timeout(), 2.0)
+
+    def derived_send_buffer(self) -> int:
+        """``send_buffer`` or its derived default.
+
+        On a rate-limited line: the bytes the line carries in one round trip
+        (``2 x one_way_delay``), at least two full packets.  That keeps the
+        line busy (the window's packets are already out of the buffer) and
+        makes ``send`` push back as soon as the line is: a fixed 64 KiB would
+        be four and a half minutes of queue at 2400 bit/s, ahead of every
+        later write -- an emergency stop included.  Rate unknown (a pty, a
+        TCP tunnel): 64 KiB, a few milliseconds on such a line.
+        """
+        if self.send_buffer is not None:
+            return self.send_buffer
+        if self.line_rate is None:
+            return _UNKNOWN_RATE_SEND_BUFFER
+        per_second = self.line_rate / self.bits_per_char
+        return max(2 * self.max_packet_length, int(per_second * 2 * self.one_way_delay))
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

@@ -509,7 +509,7 @@ class Endpoint:
         cfg = self.config
         self._negotiated = None
         self._pending_request = None
-        self._sender = Sender(send_buffer=cfg.send_buffer)
+        self._sender = Sender(send_buffer=cfg.derived_send_buffer())
         self._receiver = Receiver(
             receive_buffer=cfg.receive_buffer,
             window=cfg.window,

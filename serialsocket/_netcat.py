@@ -60,7 +60,12 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
             type=float,
             help="give up connecting after this many seconds (default: derived from the line)",
         )
-    ap.add_argument("--window", type=int, default=16, help=f"window, 1..{MAX_WINDOW} (default 16)")
+    ap.add_argument(
+        "--window",
+        type=int,
+        default=MAX_WINDOW,
+        help=f"window, 1..{MAX_WINDOW} (default {MAX_WINDOW}; capped by the line's round trip)",
+    )
     ap.add_argument(
         "--max-len",
         type=int,

@@ -100,7 +100,9 @@ def test_output_file_and_text_table(tmp_path: Path) -> None:
     assert "#### Targets" in summary
     ratio = rows[0]["ratio_to_limit"]
     verdict = "pass" if ratio >= 0.9 else "**miss**"
-    assert f"| 9600 | 0 | 0.0001 | {ratio:.3f} {verdict} | - | - |" in summary
+    # The default window is 31, so the row fills both the default and the 31 column.
+    cell = f"{ratio:.3f} {verdict}"
+    assert f"| 9600 | 0 | 0.0001 | {cell} | {cell} | - |" in summary
 
 
 def test_plot_writes_png(tmp_path: Path) -> None:

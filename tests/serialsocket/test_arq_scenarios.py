@@ -514,7 +514,8 @@ def test_effective_window_covers_the_repair_horizon() -> None:
 
 
 def test_paced_output_on_a_slow_line() -> None:
-    cfg = EndpointConfig(one_way_delay=1.3, line_rate=2400, window=31)
+    # 6 KiB queued at once: more than the derived send buffer (one round trip, 624 bytes).
+    cfg = EndpointConfig(one_way_delay=1.3, line_rate=2400, window=31, send_buffer=64 * 1024)
     a, b = Endpoint(cfg), Endpoint(cfg)
     link = SimLink(a, b, delay=1.3, rate=2400)
     b.listen()
@@ -682,3 +683,16 @@ def test_illegal_operations_are_local_errors() -> None:
         EndpointConfig(window=32)
     with pytest.raises(LocalProtocolError, match="one_way_delay"):
         EndpointConfig(one_way_delay=float("nan"))
+
+
+def test_defaults_window_31_and_a_send_buffer_of_one_round_trip() -> None:
+    assert EndpointConfig().window == 31
+    # 2400 bit/s 8N1 carries 240 bytes/s; one round trip at 1.3 s each way is 624 bytes.
+    slow = EndpointConfig(line_rate=2400, one_way_delay=1.3)
+    assert slow.derived_send_buffer() == 624
+    assert Endpoint(slow).send_buffer_free == 624
+    assert EndpointConfig(line_rate=2400).derived_send_buffer() == 256  # two full packets
+    assert EndpointConfig(one_way_delay=1.3).derived_send_buffer() == 64 * 1024  # rate unknown
+    assert EndpointConfig(line_rate=2400, send_buffer=10).derived_send_buffer() == 10
+    with pytest.raises(LocalProtocolError, match="send_buffer"):
+        EndpointConfig(send_buffer=0)

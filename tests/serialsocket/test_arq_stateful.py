@@ -109,6 +109,7 @@ def _config(window: int, length: int, rate: float | None, delay: float) -> Endpo
         dead_after=LIVENESS_TIMEOUT,
         connect_timeout=LIVENESS_TIMEOUT,
         linger=LINGER,
+        send_buffer=64 * 1024,  # the whole stream is queued at once (the derived one is smaller)
     )
 
 
