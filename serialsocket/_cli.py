@@ -1,10 +1,11 @@
-"""Command line: ``serialsocket encode|decode|listen|connect`` (also ``python -m serialsocket``).
+"""Command line: ``serialsocket encode|decode|listen|connect|kermit`` (``python -m serialsocket``).
 
 ``encode`` reads payload bytes on stdin and writes wire packets on stdout;
 ``decode`` reads wire bytes on stdin and prints one JSON object per packet or
 per rejected chunk.  ``encode | decode --raw`` reproduces the input exactly.
 ``listen PORT`` and ``connect PORT`` are a netcat over the serial socket
-(see :mod:`serialsocket._netcat`).
+(see :mod:`serialsocket._netcat`).  ``kermit send|receive`` is Kermit file
+transfer (see :mod:`serialsocket._kermit_cli`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from collections.abc import Sequence
 from ._checks import BlockCheck
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError, MalformedDataError
+from ._kermit_cli import add_arguments as add_kermit_arguments
+from ._kermit_cli import kermit_main
 from ._netcat import add_arguments as add_netcat_arguments
 from ._netcat import netcat_main
 from ._packet import Packet, build_packet, data_capacity
@@ -40,8 +43,8 @@ def _check(value: str) -> BlockCheck:
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m serialsocket",
-        description="Serial sockets: a netcat over a serial line (listen, connect) and the "
-        "Kermit packet inspector (encode, decode).",
+        description="Serial sockets: a netcat over a serial line (listen, connect), the "
+        "Kermit packet inspector (encode, decode) and Kermit file transfer (kermit).",
     )
     sub = ap.add_subparsers(dest="command", required=True)
 
@@ -79,6 +82,10 @@ def _parser() -> argparse.ArgumentParser:
     add_netcat_arguments(lis, listening=True)
     con = sub.add_parser("connect", help="connect over PORT; stdin to the link, the link to stdout")
     add_netcat_arguments(con, listening=False)
+    ker = sub.add_parser(
+        "kermit", help="Kermit file transfer with C-Kermit, G-Kermit or ours (send, receive)"
+    )
+    add_kermit_arguments(ker)
     return ap
 
 
@@ -164,6 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.command in ("listen", "connect"):
         return netcat_main(args, listening=args.command == "listen")
+    if args.command == "kermit":
+        return kermit_main(args)
     try:
         if args.command == "encode":
             return _encode(args)

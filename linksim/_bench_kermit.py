@@ -1,0 +1,359 @@
+"""``linksim bench kermit``: Kermit file-transfer goodput, ours against C-Kermit's.
+
+Each run sends one file of random binary through ``linksim relay`` (in this
+process) between two ptys, with the same line settings for every pairing:
+
+* ``ours->ckermit``: ``serialsocket kermit send`` to C-Kermit's receiver;
+* ``ckermit->ckermit``: C-Kermit sending to C-Kermit (the reference);
+* optionally ``ckermit->ours`` and the G-Kermit pairings (``--pairs``).
+
+Both sides are told the same window, packet length and block check; streaming
+is off (``set streaming off``: it is not an option on an impaired line and
+ours does not offer it).  The time runs from starting the sender to the
+receiver's exit, so it includes the programs' start-up; the file must be big
+enough to make that small.  The received file is compared byte for byte.
+
+The same machinery runs the interop tests (tests/serialsocket/test_kermit_interop.py):
+:func:`run_transfer` is the one entry point.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import trio
+
+from serialsocket import open_port
+from serialsocket._kermit_io import kermit_receive, kermit_send
+from serialsocket._kermit_params import KermitConfig
+
+from ._config import DirectionConfig, LinkConfig
+from ._relay import run_relay
+
+__all__ = [
+    "PEERS",
+    "TransferSetup",
+    "add_arguments",
+    "available",
+    "main",
+    "run_transfer",
+]
+
+PEERS = ("ours", "ckermit", "gkermit")
+_PROGRAMS = {"ckermit": "kermit", "gkermit": "gkermit"}
+_DEFAULT_PAIRS = ("ours->ckermit", "ckermit->ckermit")
+_START_GAP = 0.3
+"""Seconds between starting the receiver and the sender: the receiver must
+have opened its tty first, or the sender's S packet meets a closed pty."""
+
+
+def available(peer: str) -> bool:
+    """True when ``peer`` can run here (ours always; the others need their program)."""
+    return peer == "ours" or shutil.which(_PROGRAMS[peer]) is not None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TransferSetup:
+    """One transfer: who sends, who receives, the line and the protocol settings.
+
+    Attributes:
+        sender, receiver: ``ours``, ``ckermit`` or ``gkermit``.
+        window: window slots both sides are told to use (G-Kermit has none).
+        packet_length: the Kermit receive packet length both sides are told
+            (Kermit's own measure, as C-Kermit's SET RECEIVE PACKET-LENGTH;
+            ours is given the same number as its MARK-through-CHECK length).
+        delay: one-way line delay, s.
+        byte_error_rate: probability a byte is corrupted, each direction.
+        rate: line rate in bit/s, or None for as fast as the ptys go.
+        timeout: fixed timeout for both sides, s (Kermit TIME units: whole seconds).
+        limit: hard limit for the whole transfer, s; stragglers are killed.
+        seed: the relay's random seed.
+    """
+
+    sender: str
+    receiver: str
+    window: int = 8
+    packet_length: int = 1000
+    delay: float = 0.0
+    byte_error_rate: float = 0.0
+    rate: float | None = None
+    timeout: int = 5
+    limit: float = 120.0
+    seed: int = 1
+
+
+def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]) -> list[str]:
+    """C-Kermit, non-interactive: settings, then SEND or RECEIVE, then EXIT with its status."""
+    cmds = [
+        f"set line {line}",
+        "set carrier-watch off",
+        "set flow none",
+        "set parity none",
+        "set streaming off",
+        "set file type binary",
+        "set transfer mode manual",
+        "set file names literal",
+        "set file collision overwrite",
+        "set attributes on",
+        f"set window {setup.window}",
+        f"set receive packet-length {setup.packet_length}",
+        f"set send packet-length {setup.packet_length}",
+        "set block-check 3",
+        f"set send timeout {setup.timeout} fixed",
+        f"set receive timeout {setup.timeout}",
+        "set retry-limit 20",
+    ]
+    if files:
+        verb = "send" if len(files) == 1 else "msend"
+        cmds.append(f"{verb} " + " ".join(str(f) for f in files))
+    else:
+        cmds.append("receive")
+    cmds.append("exit \\v(status)")
+    return ["kermit", "-Y", "-q", "-B", "-C", ", ".join(cmds)]
+
+
+def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[str]:
+    """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
+    argv = ["gkermit", "-q", "-i", "-P", "-w", "-S", "-b", str(setup.timeout)]
+    argv += ["-e", str(min(max(setup.packet_length, 40), 9000))]
+    return [*argv, "-s", *map(str, files)] if files else [*argv, "-r"]
+
+
+def _our_config(setup: TransferSetup) -> KermitConfig:
+    return KermitConfig(
+        max_packet_length=setup.packet_length,
+        window=setup.window,
+        timeout=float(setup.timeout),
+        retry_limit=20,
+    )
+
+
+async def _run_peer(
+    peer: str,
+    setup: TransferSetup,
+    line: str,
+    files: Sequence[pathlib.Path],
+    directory: pathlib.Path,
+    log: list[str],
+) -> None:
+    """Run one side to completion; raises on failure (with the program's output)."""
+    if peer == "ours":
+        port = await open_port(line)
+        async with port:
+            if files:
+                await kermit_send(port, files, _our_config(setup))
+            else:
+                await kermit_receive(port, directory, _our_config(setup))
+        return
+    if peer == "ckermit":
+        argv = _ckermit_argv(setup, line, files)
+        result = await trio.run_process(
+            argv, cwd=directory, capture_stdout=True, capture_stderr=True, check=False
+        )
+    else:
+        fd = os.open(line, os.O_RDWR | os.O_NOCTTY)
+        try:
+            result = await trio.run_process(
+                _gkermit_argv(setup, files),
+                cwd=directory,
+                stdin=fd,
+                stdout=fd,
+                capture_stderr=True,
+                check=False,
+            )
+        finally:
+            os.close(fd)
+    out = (result.stdout or b"") + (result.stderr or b"")
+    log.append(out.decode("utf-8", "replace"))
+    if result.returncode != 0:
+        raise RuntimeError(
+            f"{peer} exited with status {result.returncode}: "
+            f"{out.decode('utf-8', 'replace')[-500:]}"
+        )
+
+
+async def _transfer(
+    setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
+) -> float:
+    direction = DirectionConfig(
+        rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
+    )
+    config = LinkConfig.symmetric(direction, seed=setup.seed)
+    log: list[str] = []
+    with trio.fail_after(setup.limit):
+        async with trio.open_nursery() as nursery:
+            stop = trio.Event()
+            ready: list[tuple[str, str]] = []
+            got_paths = trio.Event()
+
+            def on_ready(a: str, b: str) -> None:
+                ready.append((a, b))
+                got_paths.set()
+
+            nursery.start_soon(lambda: run_relay(config, stop=stop, on_ready=on_ready))
+            await got_paths.wait()
+            line_a, line_b = ready[0]
+            done = trio.Event()
+            errors: list[BaseException] = []
+
+            async def receiver() -> None:
+                try:
+                    await _run_peer(setup.receiver, setup, line_b, [], out_dir, log)
+                except Exception as exc:
+                    errors.append(exc)
+                done.set()
+
+            nursery.start_soon(receiver)
+            await trio.sleep(_START_GAP)
+            t0 = time.perf_counter()
+            try:
+                await _run_peer(setup.sender, setup, line_a, files, out_dir.parent, log)
+            except Exception as exc:
+                errors.append(exc)
+            with trio.move_on_after(max(4 * setup.timeout, 10)):
+                await done.wait()
+            elapsed = time.perf_counter() - t0
+            stop.set()
+            nursery.cancel_scope.cancel()
+    if not done.is_set():
+        errors.append(RuntimeError(f"the {setup.receiver} receiver did not finish"))
+    if errors:
+        raise RuntimeError(f"{setup.sender}->{setup.receiver} failed: {errors[0]}") from errors[0]
+    return elapsed
+
+
+def run_transfer(
+    setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
+) -> float:
+    """Send ``files`` (which must not be in ``out_dir``) and check what arrives.
+
+    Returns:
+        Seconds from starting the sender to the receiver's exit.
+
+    Raises:
+        RuntimeError: a side failed or timed out (message includes its output).
+        AssertionError: a received file differs from the original.
+    """
+    elapsed = trio.run(_transfer, setup, files, out_dir)
+    for f in files:
+        got = (out_dir / f.name).read_bytes()
+        if got != f.read_bytes():
+            raise AssertionError(
+                f"{f.name}: received {len(got)} bytes that differ from the "
+                f"{f.stat().st_size} sent ({setup.sender}->{setup.receiver})"
+            )
+    return elapsed
+
+
+def _measure(
+    pair: str, args: argparse.Namespace, data: bytes, workdir: pathlib.Path
+) -> dict[str, object]:
+    sender, receiver = pair.split("->")
+    times: list[float] = []
+    for run in range(args.runs):
+        src = workdir / f"src{run}"
+        out = workdir / f"out-{pair.replace('->', '-')}-{run}"
+        src.mkdir(exist_ok=True)
+        out.mkdir()
+        path = src / "bench.bin"
+        path.write_bytes(data)
+        setup = TransferSetup(
+            sender=sender,
+            receiver=receiver,
+            window=args.window,
+            packet_length=args.packet_length,
+            delay=args.delay,
+            byte_error_rate=args.ber,
+            rate=args.rate,
+            timeout=args.timeout,
+            limit=args.limit,
+            seed=args.seed + run,
+        )
+        times.append(run_transfer(setup, [path], out))
+        shutil.rmtree(out)
+    median = statistics.median(times)
+    return {
+        "pair": pair,
+        "runs": args.runs,
+        "seconds": [round(t, 3) for t in times],
+        "median_seconds": round(median, 3),
+        "goodput_Bps": round(len(data) / median, 1),
+    }
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim bench kermit``."""
+    ap.add_argument("--size", type=int, default=200_000, help="file bytes (default 200000)")
+    ap.add_argument("--runs", type=int, default=3, help="runs per pairing; the median is kept")
+    ap.add_argument("--window", type=int, default=8, help="window slots (default 8)")
+    ap.add_argument("--packet-length", type=int, default=1000, help="packet length (1000)")
+    ap.add_argument("--delay", type=float, default=0.1, help="one-way delay, s (default 0.1)")
+    ap.add_argument("--ber", type=float, default=1e-4, help="byte error rate (default 1e-4)")
+    ap.add_argument("--rate", type=float, help="line rate, bit/s (default: pty speed)")
+    ap.add_argument("--timeout", type=int, default=5, help="fixed timeout, s (default 5)")
+    ap.add_argument("--limit", type=float, default=300.0, help="hard limit per transfer, s")
+    ap.add_argument("--seed", type=int, default=1, help="relay seed of the first run")
+    ap.add_argument(
+        "--pairs",
+        nargs="+",
+        default=list(_DEFAULT_PAIRS),
+        help="SENDER->RECEIVER pairings among ours, ckermit, gkermit "
+        "(default: ours->ckermit ckermit->ckermit)",
+    )
+    ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Entry point (``linksim bench kermit``); exit 2 when a program is missing."""
+    for pair in args.pairs:
+        parts = pair.split("->")
+        if len(parts) != 2 or not set(parts) <= set(PEERS):
+            print(
+                f"linksim bench kermit: bad pairing {pair!r}: use e.g. ours->ckermit",
+                file=sys.stderr,
+            )
+            return 2
+        missing = [p for p in parts if not available(p)]
+        if missing:
+            print(
+                f"linksim bench kermit: {missing[0]} is not installed "
+                "(apt-get install ckermit gkermit)",
+                file=sys.stderr,
+            )
+            return 2
+    data = os.urandom(args.size)
+    with tempfile.TemporaryDirectory(prefix="bench-kermit-") as tmp:
+        results = [_measure(p, args, data, pathlib.Path(tmp)) for p in args.pairs]
+    record = {
+        "benchmark": "kermit",
+        "bytes": args.size,
+        "window": args.window,
+        "packet_length": args.packet_length,
+        "delay": args.delay,
+        "byte_error_rate": args.ber,
+        "rate": args.rate,
+        "timeout": args.timeout,
+        "results": results,
+    }
+    if args.json:
+        print(json.dumps(record))
+        return 0
+    for r in results:
+        print(f"{r['pair']:>18}: {r['goodput_Bps']} B/s (median of {r['runs']}: {r['seconds']} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(prog="python -m linksim._bench_kermit")
+    add_arguments(parser)
+    sys.exit(main(parser.parse_args()))

@@ -1,0 +1,114 @@
+"""``serialsocket kermit send FILE... --port PORT`` and ``kermit receive [DIR] --port PORT``.
+
+Kermit file transfer with C-Kermit, G-Kermit or another copy of this program
+on the far end of a serial line or pty.  Exit status: 0 transferred, 1 the
+transfer failed (the message says whether the peer or we gave up), 2 bad
+arguments or a port/file that cannot be opened.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import asdict
+
+import trio
+
+from ._checks import BlockCheck
+from ._errors import LocalProtocolError
+from ._kermit import KermitStatistics
+from ._kermit_io import KermitTransferError, kermit_receive, kermit_send
+from ._kermit_params import KermitConfig
+from ._port import open_port
+
+__all__ = ["add_arguments", "kermit_main"]
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """The ``kermit`` subcommand's options (``send`` and ``receive``)."""
+    sub = ap.add_subparsers(dest="kermit_command", required=True)
+    send = sub.add_parser("send", help="send files to a Kermit receiver")
+    send.add_argument("files", metavar="FILE", nargs="+", help="files to send (binary mode)")
+    recv = sub.add_parser("receive", help="receive files from a Kermit sender")
+    recv.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
+    for p in (send, recv):
+        p.add_argument("--port", required=True, help="device path, pty or pyserial URL")
+        p.add_argument("--baud", type=int, default=9600, help="line rate (default 9600)")
+        p.add_argument(
+            "--packet-length",
+            type=int,
+            default=1000,
+            help="longest packet, MARK through CHECK (default 1000; 96 or less = no long packets)",
+        )
+        p.add_argument("--window", type=int, default=8, help="window slots, 1..31 (default 8)")
+        p.add_argument(
+            "--check", type=int, choices=(1, 2, 3), default=3, help="block check (default 3)"
+        )
+        p.add_argument(
+            "--timeout",
+            type=float,
+            help="fixed local timeout in seconds (default: what the peer asks for); "
+            "on a delayed link set it above the round trip of a full window",
+        )
+        p.add_argument(
+            "--retries", type=int, default=10, help="retries per packet, 0 = no limit (default 10)"
+        )
+        p.add_argument(
+            "--seven-bit", action="store_true", help="7-bit line: require 8th-bit prefixing"
+        )
+        p.add_argument("--no-repeat", action="store_true", help="do not offer repeat counts")
+        p.add_argument("--stats", action="store_true", help="print the counters as JSON on stderr")
+        p.add_argument("-v", "--verbose", action="store_true", help="log each file to stderr")
+
+
+def _config(args: argparse.Namespace) -> KermitConfig:
+    return KermitConfig(
+        max_packet_length=args.packet_length,
+        window=args.window,
+        check=BlockCheck(args.check),
+        timeout=args.timeout,
+        retry_limit=args.retries,
+        seven_bit=args.seven_bit,
+        repeat=not args.no_repeat,
+    )
+
+
+async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatistics:
+    port = await open_port(args.port, args.baud)
+    async with port:
+        if args.kermit_command == "send":
+            return await kermit_send(port, args.files, config)
+        return await kermit_receive(port, args.directory, config)
+
+
+def _print_stats(stats: KermitStatistics) -> None:
+    record = asdict(stats)
+    record["state"] = stats.state.value
+    record["check"] = int(stats.check)
+    print(json.dumps(record), file=sys.stderr)
+
+
+def kermit_main(args: argparse.Namespace) -> int:
+    """Run ``kermit send`` / ``kermit receive``; returns the exit status."""
+    if args.verbose:
+        logging.basicConfig(level=logging.INFO, format="kermit: %(message)s")
+    try:
+        config = _config(args)
+        stats = trio.run(_run, args, config)
+    except LocalProtocolError as exc:
+        print(f"serialsocket kermit: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"serialsocket kermit: {exc}", file=sys.stderr)
+        return 2
+    except KermitTransferError as exc:
+        who = "the peer" if exc.by_peer else "we"
+        print(f"serialsocket kermit: transfer failed ({who} gave up): {exc}", file=sys.stderr)
+        if args.stats:
+            _print_stats(exc.statistics)
+        return 1
+    if args.stats:
+        _print_stats(stats)
+    return 0
