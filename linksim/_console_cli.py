@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import pathlib
 import sys
 
 import serialsocket
@@ -62,7 +63,7 @@ def console_main(args: argparse.Namespace) -> int:
     from ._cli import config_from_args
 
     try:
-        world = WorldConfig.from_toml(args.world) if args.world else DEFAULT_WORLD
+        world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
         key = _read_key(args.key_file) if args.key_file else None
         if args.observer and (args.virtual or args.require_preview):
             raise ConfigError(

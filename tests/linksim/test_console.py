@@ -1,0 +1,155 @@
+"""The operator console renders to strings: plain lines when not a TTY, rich text otherwise."""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+
+import pytest
+
+from linksim import DEFAULT_WORLD, ConsoleSnapshot, ObjectSpec
+from linksim._cli import main
+from linksim._console import CommandRow, render_plain, render_text
+from linksim._kinematics import PUMA560
+from tcpstream import Feedback
+
+HOME = Feedback(
+    joints=DEFAULT_WORLD.initial_joints,
+    finger_opening=0.08,
+    p=(0.3988, -0.15005, 0.0652),
+    s=(0.0, 1.0, 0.0),
+    a=(0.0, 0.0, -1.0),
+)
+HOLDING = Feedback(
+    joints=(0.1, 1.2, -3.3, 0.0, -0.9, 0.1),
+    finger_opening=0.07,
+    p=(0.57, 0.15, -0.315),
+    s=(0.0, 1.0, 0.0),
+    a=(0.0, 0.0, -1.0),
+    tactile_left=True,
+    tactile_right=True,
+)
+
+
+def snapshot() -> ConsoleSnapshot:
+    return ConsoleSnapshot(
+        title="telelink console: test",
+        clock=12.5,
+        mode="driving",
+        confirmed=HOME,
+        predicted=HOLDING,
+        lower=PUMA560.lower,
+        upper=PUMA560.upper,
+        max_opening=0.08,
+        commands=(
+            CommandRow(1, "open fingers", "completed", 0.0, 2.6, 2.7, "ok"),
+            CommandRow(2, "close fingers", "accepted", 0.0, 2.7, None, "ok"),
+            CommandRow(3, "weigh", "sent", 0.0, None, None, "ok"),
+        ),
+        link={"rtt_s": 2.75, "window_occupancy": "2/28", "retransmissions": 3},
+        in_flight=2,
+        comparisons=4,
+        flagged=1,
+        max_joint_error=math.radians(1.5),
+        last_flag="#1 joint 1.50 deg, hand 3.0 mm off the model",
+        preview="all 3 commands pass, 1.10 s of motion",
+    )
+
+
+EXPECTED_PLAIN = """\
+telelink console: test  [driving]  t=12.50 s
+preview: all 3 commands pass, 1.10 s of motion
+joint        confirmed  predicted  limits (deg)
+  1  [------------|-----------]    +0.0     +5.7  -160..160
+  2  [------------|-----------]   +90.0    +68.8  -45..225
+  3  [--|---------------------]  -200.0   -189.1  -225..45
+  4  [---------|--------------]    +0.0     +0.0  -110..170
+  5  [---|--------------------]   -70.0    -51.6  -100..100
+  6  [------------|-----------]    +0.0     +5.7  -266..266
+confirmed: P (+0.399, -0.150, +0.065)  S (+0.000, +1.000, +0.000)  A (+0.000, +0.000, -1.000)  \
+gripper  80.0 mm  tactile --
+predicted: P (+0.570, +0.150, -0.315)  S (+0.000, +1.000, +0.000)  A (+0.000, +0.000, -1.000)  \
+gripper  70.0 mm  tactile LR
+ #  state      sent  accepted   done  model  command
+ 1  completed  0.00      2.60   2.70  ok     open fingers
+ 2  accepted   0.00      2.70      -  ok     close fingers
+ 3  sent       0.00         -      -  ok     weigh
+link: RTT 2.75 s, window 2/28, retransmissions 3
+model: 2 in flight, 4 comparisons, 1 flagged, max joint error 1.50 deg; \
+last flag: #1 joint 1.50 deg, hand 3.0 mm off the model"""
+
+
+def test_plain_render_is_a_stable_string() -> None:
+    assert render_plain(snapshot()) == EXPECTED_PLAIN
+
+
+def test_rich_render_to_text_at_120_columns() -> None:
+    text = render_text(snapshot(), width=120)
+    lines = text.splitlines()
+    assert all(len(line) <= 120 for line in lines)
+    assert lines[0].startswith("telelink console: test  [driving]  t=12.50 s")
+    assert any(line.startswith("1      [------------|-----------]") for line in lines)
+    assert any("tactile LR" in line and line.startswith("predicted") for line in lines)
+    assert any(line.startswith("2  accepted") and "close fingers" in line for line in lines)
+    assert "link: RTT 2.75 s, window 2/28, retransmissions 3" in text
+    assert "1 flagged" in text
+    assert "\x1b[" not in text
+
+
+def test_a_joint_outside_its_limits_shows_as_alarm() -> None:
+    bad = Feedback(
+        joints=(3.0, 1.57, -3.49, 0.0, -1.22, 0.0),
+        finger_opening=0.08,
+        p=(0.0, 0.0, 0.0),
+        s=(0.0, 1.0, 0.0),
+        a=(0.0, 0.0, -1.0),
+    )
+    text = render_plain(
+        ConsoleSnapshot("t", 0.0, "observer", bad, None, PUMA560.lower, PUMA560.upper, 0.08)
+    )
+    assert "  1  !!!!!!!!!!!!!!!!!!!!!!!!!!  +171.9        -  -160..160" in text
+    assert "predicted: -" in text
+
+
+def test_console_command_in_virtual_mode_writes_lines_and_json(
+    tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "console.jsonl"
+    status = main(
+        ["console", "--virtual", "--preset", "clean", "--plain", "--json", "--log", str(log)]
+    )
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    summary = json.loads(out)
+    assert summary["ok"] is True
+    assert summary["preview"]["ok"] is True
+    assert summary["model"]["flagged"] == 0
+    assert [c["state"] for c in summary["commands"]] == ["completed"] * 11
+    # Line output: the initial and final snapshots, an event per command step.
+    assert err.count("telelink console: rock task over serial (clean, virtual time)") == 2
+    assert "preview: all 11 commands pass, 9.13 s of motion" in err
+    assert err.count(" sent: ") == 11
+    assert err.count(" completed: ") == 11
+    assert log.stat().st_size > 0
+
+
+def test_require_preview_sends_nothing_when_the_model_refuses(
+    tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A rock beyond the arm's reach: the path over it is refused by the model.
+    far = ObjectSpec("rock", (1.5, 0.0, -0.315), 0.07, 0.85)
+    world = dataclasses.replace(DEFAULT_WORLD, objects=(far,))
+    path = tmp_path / "far.toml"
+    path.write_text(world.to_toml())
+    status = main(
+        ["console", "--virtual", "--plain", "--json", "--require-preview", "--world", str(path)]
+    )
+    out, err = capsys.readouterr()
+    assert status == 1
+    summary = json.loads(out)
+    assert summary["preview"]["first_refusal"]["index"] == 2
+    assert summary["preview"]["first_refusal"]["outcome"] == "UNREACHABLE"
+    assert all(c["sent_s"] is None for c in summary["commands"])
+    assert "nothing was sent" in summary["error"]
+    assert "would be refused: UNREACHABLE" in err
