@@ -29,6 +29,9 @@ MIN_ENDPOINT_PACKET_LENGTH = 33
 receive it, so no endpoint may announce less (MIN_PACKET_LENGTH bounds the
 packet layer alone)."""
 
+_DERIVED_LENGTHS = (DEFAULT_MAX_PACKET_LENGTH, 256, 512, 1024, 2048)
+"""Candidate derived packet lengths: the goodput grid's (bench/results/README.md)."""
+
 _UNKNOWN_RATE_SEND_BUFFER = 64 * 1024
 """Send buffer when the line rate is unknown: a fast line (pty, TCP tunnel)
 drains it in milliseconds, and large writes need few wake-ups."""
@@ -43,8 +46,11 @@ class EndpointConfig:
 
     Attributes:
         max_packet_length: largest packet this side receives, MARK through
-            CHECK (default 128, the paper's packet size).  The peer's value
-            bounds what this side sends.
+            CHECK.  The peer's value bounds what this side sends.  None
+            derives it (:meth:`derived_max_packet_length`): 128, the paper's
+            size, unless line rate and delay say 31 such packets cannot
+            cover the repair of a loss; then the shortest power of two that
+            can.
         window: window in packets, 1..31 (default 31, the most the mod-64
             sequence numbers allow).  1 is the paper's stop-and-wait.  The
             sender never has more unacknowledged packets than the line
@@ -84,7 +90,7 @@ class EndpointConfig:
             request ends it early).
     """
 
-    max_packet_length: int = DEFAULT_MAX_PACKET_LENGTH
+    max_packet_length: int | None = None
     window: int = MAX_WINDOW
     check: BlockCheck = BlockCheck.CRC16
     encoding: Encoding = field(default=PRINTABLE)
@@ -103,7 +109,9 @@ class EndpointConfig:
         def bad(name: str, value: object, allowed: str) -> LocalProtocolError:
             return LocalProtocolError(f"EndpointConfig.{name}={value!r}: must be {allowed}")
 
-        if not MIN_ENDPOINT_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
+        if self.max_packet_length is not None and not (
+            MIN_ENDPOINT_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH
+        ):
             raise bad(
                 "max_packet_length",
                 self.max_packet_length,
@@ -155,7 +163,7 @@ class EndpointConfig:
         pacing horizon), and a margin of a quarter of the round trip, at least
         50 ms for process scheduling on either side.
         """
-        full = self.max_packet_length + 1
+        full = self.derived_max_packet_length() + 1
         base = self.physical_rtt(full) + 2 * self.transmit_time(full)
         return base + max(0.25 * base, 0.05)
 
@@ -166,6 +174,31 @@ class EndpointConfig:
     def derived_dead_after(self) -> float:
         """``dead_after`` or its derived default."""
         return self.dead_after or max(10 * self.initial_timeout(), 2.0)
+
+    def derived_max_packet_length(self) -> int:
+        """``max_packet_length`` or its derived default.
+
+        128 (the paper's size; every Kermit peer accepts it; within a few per
+        cent of the best length on slow lines at any error rate) unless the
+        line is known to be fast and long: then the shortest of 256, 512,
+        1024, 2048 whose window of 31 packets covers the repair of a loss,
+        ``2 x rtt + 2 x tx`` (PROTOCOL.md 4.6), because the window cannot
+        grow past 31 and a packet's header is the only other cost.  The error
+        rate is not known here, so the rule never goes below 128 and stops
+        at the first length that fills the line: longer packets only add
+        exposure to errors.  At 2400 bit/s it stays 128 up to 3.6 s one way;
+        it is 256 at 9600 bit/s and 512 at 19200 bit/s on the Earth-Moon
+        path.
+        """
+        if self.max_packet_length is not None:
+            return self.max_packet_length
+        if self.line_rate is None:
+            return DEFAULT_MAX_PACKET_LENGTH
+        for length in _DERIVED_LENGTHS:
+            tx = self.transmit_time(length + 1)
+            if MAX_WINDOW * tx >= 2 * self.physical_rtt(length + 1) + 2 * tx:
+                return length
+        return _DERIVED_LENGTHS[-1]
 
     def derived_send_buffer(self) -> int:
         """``send_buffer`` or its derived default.
@@ -183,7 +216,7 @@ class EndpointConfig:
         if self.line_rate is None:
             return _UNKNOWN_RATE_SEND_BUFFER
         per_second = self.line_rate / self.bits_per_char
-        return max(2 * self.max_packet_length, int(per_second * 2 * self.one_way_delay))
+        return max(2 * self.derived_max_packet_length(), int(per_second * 2 * self.one_way_delay))
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

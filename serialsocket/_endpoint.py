@@ -165,19 +165,20 @@ class Endpoint:
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
         cfg = self.config
+        self._max_length = cfg.derived_max_packet_length()
         self._mine = InitParameters.mine(
-            max_packet_length=cfg.max_packet_length,
+            max_packet_length=self._max_length,
             window=cfg.window,
             check=cfg.check,
             encoding=cfg.encoding,
             timeout_hint=cfg.initial_timeout(),
         )
         self._parser = PacketParser(
-            max_length=cfg.max_packet_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
+            max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
         )
-        self._full_wire = cfg.max_packet_length + 1
+        self._full_wire = self._max_length + 1
         self._rtt = RttEstimator(
-            floor=self._timeout_floor(cfg.max_packet_length, cfg.max_packet_length),
+            floor=self._timeout_floor(self._max_length, self._max_length),
             # Backoff stops at a minute (or 8 initial timeouts on slower paths),
             # and at half of dead_after: then within any dead_after of silence
             # a copy leaves with half of it to spare for its answer, so the
@@ -513,13 +514,13 @@ class Endpoint:
         self._receiver = Receiver(
             receive_buffer=cfg.receive_buffer,
             window=cfg.window,
-            capacity=data_capacity(cfg.max_packet_length, cfg.check),
+            capacity=data_capacity(self._max_length, cfg.check),
         )
         self._control = []
         self._events = deque()
         self._parser.reset()
         self._parser.check = BlockCheck.CRC16
-        self._parser.max_length = cfg.max_packet_length
+        self._parser.max_length = self._max_length
         self._send_check = BlockCheck.CRC16
         self._encoding = PRINTABLE
         self._capacity = 0

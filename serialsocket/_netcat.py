@@ -69,8 +69,9 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
     ap.add_argument(
         "--max-len",
         type=int,
-        default=DEFAULT_MAX_PACKET_LENGTH,
-        help=f"largest packet to receive, MARK..CHECK (default {DEFAULT_MAX_PACKET_LENGTH})",
+        default=None,
+        help=f"largest packet to receive, MARK..CHECK (default {DEFAULT_MAX_PACKET_LENGTH}, "
+        "longer on a fast line with --delay of a second or more)",
     )
     ap.add_argument(
         "--delay",

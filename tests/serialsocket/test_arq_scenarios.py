@@ -696,3 +696,25 @@ def test_defaults_window_31_and_a_send_buffer_of_one_round_trip() -> None:
     assert EndpointConfig(line_rate=2400, send_buffer=10).derived_send_buffer() == 10
     with pytest.raises(LocalProtocolError, match="send_buffer"):
         EndpointConfig(send_buffer=0)
+
+
+def test_derived_packet_length_follows_a_fast_long_line_only() -> None:
+    def length(rate: float | None, delay: float) -> int:
+        return EndpointConfig(line_rate=rate, one_way_delay=delay).derived_max_packet_length()
+
+    assert length(None, 1.3) == 128  # rate unknown
+    assert length(2400, 1.3) == 128  # 31 x 0.5375 s covers 2 rtt + 2 tx = 7.43 s
+    assert length(2400, 3.5) == 128
+    assert length(9600, 0.27) == 128
+    # 9600 bit/s, 1.3 s: 31 x 129/960 = 4.17 s < 2 x 2.745 + 0.27 = 5.76 s; 256 covers it.
+    assert length(9600, 1.3) == 256
+    assert length(19200, 1.3) == 512
+    assert (
+        EndpointConfig(
+            line_rate=9600, one_way_delay=1.3, max_packet_length=94
+        ).derived_max_packet_length()
+        == 94
+    )
+    a, _b, _t = connected(EndpointConfig(line_rate=9600, one_way_delay=1.3))
+    assert a.parameters is not None
+    assert a.parameters.send_max_length == 256
