@@ -48,6 +48,10 @@ __all__ = [
 
 LinkProbe = Callable[[], Mapping[str, Any]]
 
+STATE_LINE_INTERVAL = 1.0
+"""s: line output prints the arm state at most this often (telemetry comes
+at 12.5 Hz, seed 004's every tenth sample: too fast to read as lines)."""
+
 BAR = 24
 """Characters in a joint bar: one per 1/24 of the joint's range (~13 deg on the PUMA)."""
 
@@ -121,6 +125,9 @@ def _link_text(link: Mapping[str, Any]) -> str:
         parts.append(f"RTT {rtt:.2f} s")
     for key, name in (
         ("window_occupancy", "window"),
+        ("pending", "in flight"),
+        ("packets_sent", "packets out"),
+        ("packets_received", "packets in"),
         ("retransmissions", "retransmissions"),
         ("check_failures", "check failures"),
         ("reconnects", "reconnects"),
@@ -137,6 +144,12 @@ def _gripper(f: Feedback | None) -> str:
         return "-"
     switches = ("L" if f.tactile_left else "-") + ("R" if f.tactile_right else "-")
     return f"{f.finger_opening * 1000:5.1f} mm  tactile {switches}"
+
+
+def _state_summary(f: Feedback) -> str:
+    """One line of arm state for line output (degrees, metres)."""
+    joints = ", ".join(f"{math.degrees(q):.1f}" for q in f.joints)
+    return f"state: joints ({joints}) deg, P {_xyz(f.p)} m, gripper {_gripper(f)}"
 
 
 def _state_lines(s: ConsoleSnapshot) -> list[str]:
@@ -162,6 +175,8 @@ def _state_lines(s: ConsoleSnapshot) -> list[str]:
 
 
 def _model_line(s: ConsoleSnapshot) -> str:
+    if s.mode == "observer":
+        return "model: none (an observer does not see the commands, so it predicts nothing)"
     text = (
         f"model: {s.in_flight} in flight, {s.comparisons} comparisons, {s.flagged} flagged, "
         f"max joint error {math.degrees(s.max_joint_error):.2f} deg"
@@ -300,6 +315,7 @@ class ConsoleSession:
         self._live: Live | None = None
         self._last_flag: str | None = None
         self.telemetry_samples = 0
+        self._last_state_line = -math.inf
 
     # --- display -------------------------------------------------------------------
 
@@ -393,13 +409,19 @@ class ConsoleSession:
         """A telemetry sample (every tenth control sample, seed 004)."""
         now = self._clock()
         self.telemetry_samples += 1
-        if self.run is None and self.telemetry_samples == 1:
-            self.predictor.reset(feedback, now)
-        divergence = self.predictor.observe(feedback, now)
         if self._log is not None:
             self._log.state(now, "telemetry", feedback)
-            if divergence.flagged:
+        if self.run is None:
+            # An observer does not know what the controller sent: it shows
+            # the arm's reports and predicts nothing (no false divergences).
+            self.predictor.reset(feedback, now)
+        else:
+            divergence = self.predictor.observe(feedback, now)
+            if divergence.flagged and self._log is not None:
                 self._log.record(now, "divergence", divergence.as_dict())
+        if self._live is None and now - self._last_state_line >= STATE_LINE_INTERVAL:
+            self._last_state_line = now
+            self._line(_state_summary(feedback))
         self.refresh()
 
     # --- output ----------------------------------------------------------------------
@@ -448,7 +470,7 @@ class ConsoleSession:
             clock=self._clock() - self._origin,
             mode="observer" if self.run is None else "driving",
             confirmed=p.confirmed,
-            predicted=p.predicted,
+            predicted=None if self.run is None else p.predicted,
             lower=self._model.lower,
             upper=self._model.upper,
             max_opening=self.world.max_opening,

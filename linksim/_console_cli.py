@@ -38,6 +38,13 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
         help="arm server, impaired link (--preset, default noisy-moon) and console in one "
         "process on a virtual clock: instant, deterministic",
     )
+    ap.add_argument(
+        "--speedup",
+        type=float,
+        default=0.0,
+        help="with --virtual: run the virtual clock this many times faster than real time "
+        "to watch the run (default 0: as fast as possible)",
+    )
     ap.add_argument("--observer", action="store_true", help="watch an arm (tcp); send nothing")
     ap.add_argument("--task", choices=["rock"], default="rock", help="the command list to drive")
     ap.add_argument(
@@ -65,6 +72,8 @@ def console_main(args: argparse.Namespace) -> int:
     try:
         world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
         key = _read_key(args.key_file) if args.key_file else None
+        if args.speedup < 0 or (args.speedup and not args.virtual):
+            raise ConfigError("--speedup is a positive factor for --virtual runs")
         if args.observer and (args.virtual or args.require_preview):
             raise ConfigError(
                 "--observer watches a running arm: not with --virtual/--require-preview"
@@ -100,6 +109,7 @@ def console_main(args: argparse.Namespace) -> int:
             port=args.port,
             baud=args.baud,
             dial=args.dial,
+            rate=args.speedup,
         )
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim console: {exc}", file=sys.stderr)

@@ -56,6 +56,9 @@ class ConsoleOptions:
     dial: str | None = None
     out: TextIO | None = None
     """Where the console draws (default stderr)."""
+    rate: float = 0.0
+    """Virtual runs only: the virtual clock runs this many times faster than
+    the wall clock, so the run can be watched; 0 = as fast as possible."""
     arm_world: Any = None
     """Virtual runs only: the *remote* arm's world when it differs from the
     model's (``demo.world``), to show divergence; None = the same world."""
@@ -96,21 +99,37 @@ def _window_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
     return serial_link_figures(sock) | {"window_occupancy": f"{s.in_flight}/{s.effective_window}"}
 
 
+def _session_figures(client: ArmClient) -> dict[str, Any]:
+    """A command session's own figures (all a TCP link has): in flight, packets, bytes."""
+    stats = client.statistics()
+    conn = stats.get("connection")
+    out: dict[str, Any] = {
+        "pending": stats["pending"],
+        "reconnects": stats["reconnects"],
+        "bytes_sent": stats["bytes_sent"],
+        "bytes_received": stats["bytes_received"],
+    }
+    if conn is not None:
+        out["packets_sent"] = getattr(conn, "packets_out", 0)
+        out["packets_received"] = getattr(conn, "packets_in", 0)
+    return out
+
+
 async def _telemetry_loop(client: ArmClient, session: ConsoleSession) -> None:
     async for feedback in client.telemetry():
         session.telemetry(feedback)
 
 
 async def _drive(client: ArmClient, session: ConsoleSession, options: ConsoleOptions) -> None:
-    """Preview, then run the task (or watch), feeding the console."""
+    """Run the task (or watch until the session ends), feeding the console."""
+    run = session.run
+    if run is None:
+        await _telemetry_loop(client, session)  # ends with the session
+        return
     async with trio.open_nursery() as nursery:
         nursery.start_soon(_telemetry_loop, client, session)
-        run = session.run
-        if run is None:
-            await trio.sleep_forever()  # an observer watches until the session ends
-        else:
-            run.on_change = session.changed
-            await run.run(client)
+        run.on_change = session.changed
+        await run.run(client)
         nursery.cancel_scope.cancel()
 
 
@@ -256,9 +275,9 @@ async def _real_session(
             key=demo.key,
             observer=options.observer,
         ) as client:
-            session.link = lambda: client_link_figures(client)
+            session.link = lambda: _session_figures(client)
             await _drive(client, session, options)
-            figures.update(client_link_figures(client))
+            figures.update(_session_figures(client))
         return
     if options.port is None:
         raise OSError("--port PATH is needed for the serial transport")
@@ -293,5 +312,9 @@ def _result(
 def run_console(options: ConsoleOptions) -> ConsoleResult:
     """Run the console to the end (never raises for a failed run)."""
     if options.demo.virtual:
-        return trio.run(_virtual, options, clock=trio.testing.MockClock(autojump_threshold=0))
+        if options.rate > 0:
+            clock = trio.testing.MockClock(rate=options.rate)
+        else:
+            clock = trio.testing.MockClock(autojump_threshold=0)
+        return trio.run(_virtual, options, clock=clock)
     return trio.run(_real, options)

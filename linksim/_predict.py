@@ -202,7 +202,11 @@ class Predictor:
                 f"model predicted {predicted or 'completion'}, arm reported "
                 f"{failure or 'completion'}"
             )
-        self._base = step.end_state
+        if failure is None:
+            self._base = step.end_state
+        # else: the arm refused the command before it moved (the planner
+        # refuses whole motions up front; halts are NOT_RUN above), so the
+        # arm is where the base says, whatever the model predicted.
         errors = (0.0, 0.0, 0.0)
         if feedback is not None:
             errors = _errors(outcome.feedback, feedback)

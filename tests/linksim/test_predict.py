@@ -129,6 +129,9 @@ def test_predictor_fed_by_hand() -> None:
     assert d3 is not None
     assert d3.outcome == "model predicted completion, arm reported NO_OBJECT"
     assert d3.flagged
+    # A refused command did not move the arm: the base stays at command 2's report.
+    assert p.base.world.initial_joints == moved.joints
+    assert p.predicted == dataclasses.replace(p.predicted, joints=moved.joints)
     assert p.completed(99, 13.0) is None
     assert (p.comparisons, p.flagged) == (3, 2)
 
@@ -144,3 +147,25 @@ def test_a_skipped_command_is_not_a_divergence() -> None:
     assert not d.flagged
     assert p.completed(2, 2.0, failure="SKIPPED") is None
     assert p.comparisons == 1
+
+
+def test_a_missing_object_is_an_unpredicted_refusal_and_the_arm_stays_put() -> None:
+    # The arm's table has no rock (someone already moved it): centring fails there.
+    arm_world = dataclasses.replace(DEFAULT_WORLD, objects=DEFAULT_WORLD.objects[1:])
+    result = console_run(MOON, arm_world=arm_world)
+    assert not result.ok
+    assert result.error is not None
+    assert "refused command #3 (center fingers)" in result.error
+    session = result.session
+    assert session is not None
+    assert session.run is not None
+    p = session.predictor
+    refusal = next(d for d in p.records if d.source == "completion" and d.index == 3)
+    assert refusal.outcome == "model predicted completion, arm reported NO_OBJECT"
+    # The prediction stays where the arm stopped: after command 2's path.
+    after_path = session.run.records[1].result
+    assert after_path is not None
+    predicted = p.predicted
+    assert predicted is not None
+    assert predicted.joints == after_path.feedback.joints
+    assert p.in_flight == ()
