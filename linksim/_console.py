@@ -216,8 +216,35 @@ _STYLE = {
 }
 
 
-def render(s: ConsoleSnapshot) -> RenderableType:
-    """The snapshot as a rich layout: state table, command table, link and model lines."""
+FIXED_ROWS = 20
+"""Rows of the rich layout besides the command queue (title, preview, seven
+joint rows, three pose rows, the queue's header, link, two model lines,
+status, and slack for wrapping)."""
+
+
+def _queue_window(rows: tuple[CommandRow, ...], height: int | None) -> tuple[int, int]:
+    """Which command rows fit in ``height`` terminal rows: [start, stop).
+
+    The window keeps two finished commands above the first unfinished one
+    (the operator sees what just happened and what runs next); a live
+    display taller than the terminal would be cut at the bottom, where the
+    link and model lines are.
+    """
+    if height is None or len(rows) <= max(1, height - FIXED_ROWS):
+        return 0, len(rows)
+    room = max(1, height - FIXED_ROWS - 1)  # one row says what is hidden
+    active = next(
+        (i for i, r in enumerate(rows) if r.state not in ("completed", "failed")), len(rows)
+    )
+    start = max(0, min(active - 2, len(rows) - room))
+    return start, start + room
+
+
+def render(s: ConsoleSnapshot, height: int | None = None) -> RenderableType:
+    """The snapshot as a rich layout: state table, command table, link and model lines.
+
+    ``height`` (terminal rows) limits the command queue to a window that fits.
+    """
     head = Text(f"{s.title}  [{s.mode}]  t={s.clock:.2f} s", style="bold")
     state = Table(box=None, pad_edge=False, show_edge=False)
     for name in ("joint", "position against limits", "confirmed", "predicted", "limits"):
@@ -249,7 +276,8 @@ def render(s: ConsoleSnapshot) -> RenderableType:
         queue = Table(box=None, pad_edge=False, show_edge=False)
         for name in ("#", "state", "sent", "accepted", "done", "model", "command"):
             queue.add_column(name, justify="right" if name in ("#", "sent", "done") else "left")
-        for r in s.commands:
+        start, stop = _queue_window(s.commands, height)
+        for r in s.commands[start:stop]:
             label = r.label + (f"  [{r.reason}]" if r.reason else "")
             queue.add_row(
                 str(r.index),
@@ -261,6 +289,11 @@ def render(s: ConsoleSnapshot) -> RenderableType:
                 label,
             )
         parts.append(queue)
+        hidden = len(s.commands) - (stop - start)
+        if hidden:
+            parts.append(
+                Text(f"   ({start} earlier, {len(s.commands) - stop} later commands not shown)")
+            )
     parts.append(Text("link: " + _link_text(s.link)))
     parts.append(Text(_model_line(s), style="bold red" if s.flagged else ""))
     if s.status:
@@ -313,6 +346,7 @@ class ConsoleSession:
         self._out = out if out is not None else sys.stderr
         self._live_wanted = self._out.isatty() if live is None else live
         self._live: Live | None = None
+        self._console: Console | None = None
         self._last_flag: str | None = None
         self.telemetry_samples = 0
         self._last_state_line = -math.inf
@@ -322,7 +356,8 @@ class ConsoleSession:
     def __enter__(self) -> ConsoleSession:
         if self._live_wanted:
             console = Console(file=self._out)
-            self._live = Live(render(self.snapshot()), console=console, auto_refresh=False)
+            self._console = console
+            self._live = Live(self._render(), console=console, auto_refresh=False)
             self._live.__enter__()
         else:
             print(render_plain(self.snapshot()), file=self._out, flush=True)
@@ -330,11 +365,17 @@ class ConsoleSession:
 
     def __exit__(self, *exc: object) -> None:
         if self._live is not None:
-            self._live.update(render(self.snapshot()), refresh=True)
+            # The last frame stays on the screen: all of it (rich stops a
+            # live display with overflow visible, so nothing is cut).
+            self._live.update(render(self.snapshot()))
             self._live.__exit__(None, None, None)
             self._live = None
         else:
             print(render_plain(self.snapshot()), file=self._out, flush=True)
+
+    def _render(self) -> RenderableType:
+        height = self._console.size.height if self._console is not None else None
+        return render(self.snapshot(), height)
 
     def _line(self, text: str) -> None:
         if self._live is None:
@@ -343,7 +384,7 @@ class ConsoleSession:
     def refresh(self) -> None:
         """Redraw (live mode); line mode prints events as they happen instead."""
         if self._live is not None:
-            self._live.update(render(self.snapshot()), refresh=True)
+            self._live.update(self._render(), refresh=True)
 
     # --- inputs ----------------------------------------------------------------------
 
