@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import pathlib
+import re
 
 import pytest
+from rich.console import Console
 
 from linksim import DEFAULT_WORLD, ConsoleSnapshot, ObjectSpec
 from linksim._cli import main
-from linksim._console import CommandRow, render_plain, render_text
+from linksim._console import CommandRow, render, render_plain, render_text
 from linksim._kinematics import PUMA560
 from tcpstream import Feedback
 
@@ -154,3 +157,22 @@ def test_require_preview_sends_nothing_when_the_model_refuses(
     assert all(c["sent_s"] is None for c in summary["commands"])
     assert "nothing was sent" in summary["error"]
     assert "would be refused: UNREACHABLE" in err
+
+
+def test_live_queue_shows_a_window_that_fits_the_terminal() -> None:
+    rows = tuple(
+        CommandRow(i, f"command {i}", "completed" if i <= 5 else "queued", 0.0, None, None, "ok")
+        for i in range(1, 12)
+    )
+    s = dataclasses.replace(snapshot(), commands=rows)
+    out = io.StringIO()
+    Console(file=out, width=120, color_system=None).print(render(s, height=24))
+    text = out.getvalue()
+    shown = [int(n) for n in re.findall(r"command (\d+)\b", text)]
+    # Room for 3 rows: two finished commands above the first unfinished one (#6).
+    assert shown == [4, 5, 6]
+    assert "(3 earlier, 5 later commands not shown)" in text
+    assert text.rstrip().splitlines()[-3].startswith("link: ")  # the model line wraps
+    assert len(text.splitlines()) <= 24
+    # Without a height (line output, the final frame) every command is shown.
+    assert all(f"command {n}" in render_text(s) for n in range(1, 12))
