@@ -309,7 +309,7 @@ def render_text(s: ConsoleSnapshot, width: int = 120) -> str:
 
 
 class ConsoleSession:
-    """The console's state machine-free glue: run + predictor + log + link probe.
+    """What the console shows, kept up to date: run + predictor + log + link probe.
 
     ``run`` is None for an observer.  ``clock`` reads the run's clock (s);
     ``origin`` is its reading at the start.  Call :meth:`changed` from

@@ -11,7 +11,6 @@ refuses to send a plan the model says the arm would refuse.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TextIO
 
@@ -37,6 +36,7 @@ from ._demo import (
 from ._pair import endpoint_config_for
 from ._preview import preview
 from ._telemetry_log import TelemetryLog
+from ._world import WorldConfig
 
 __all__ = ["ConsoleOptions", "ConsoleResult", "run_console"]
 
@@ -59,7 +59,7 @@ class ConsoleOptions:
     rate: float = 0.0
     """Virtual runs only: the virtual clock runs this many times faster than
     the wall clock, so the run can be watched; 0 = as fast as possible."""
-    arm_world: Any = None
+    arm_world: WorldConfig | None = None
     """Virtual runs only: the *remote* arm's world when it differs from the
     model's (``demo.world``), to show divergence; None = the same world."""
 
@@ -133,9 +133,8 @@ async def _drive(client: ArmClient, session: ConsoleSession, options: ConsoleOpt
         nursery.cancel_scope.cancel()
 
 
-def _session(
-    options: ConsoleOptions, title: str, probe: Callable[[], Mapping[str, Any]] | None
-) -> tuple[ConsoleSession, TelemetryLog | None]:
+def _session(options: ConsoleOptions, title: str) -> tuple[ConsoleSession, TelemetryLog | None]:
+    """The console for a run (the link probe is attached once the link is up)."""
     now = trio.current_time()
     world = options.demo.world
     log = None
@@ -149,7 +148,6 @@ def _session(
         clock=trio.current_time,
         origin=now,
         log=log,
-        link=probe,
         out=options.out,
         live=options.demo.live,
     )
@@ -181,7 +179,7 @@ async def _virtual(options: ConsoleOptions) -> ConsoleResult:
     figures: dict[str, Any] = {}
     where = f"{demo.preset or 'custom link'}, virtual time"
     title = f"telelink console: rock task over {demo.transport} ({where})"
-    session, log = _session(options, title, None)
+    session, log = _session(options, title)
     error = _refused_by_preview(session, options)
     try:
         with session:
@@ -239,7 +237,7 @@ async def _real(options: ConsoleOptions) -> ConsoleResult:
     figures: dict[str, Any] = {}
     role = "watching" if options.observer else "rock task"
     title = f"telelink console: {role} over {demo.transport}"
-    session, log = _session(options, title, None)
+    session, log = _session(options, title)
     error = _refused_by_preview(session, options)
     try:
         with session:

@@ -38,8 +38,8 @@ from tcpstream._commands import (
 )
 
 from ._arm import SimulatedArm
-from ._config import ConfigError
 from ._control import describe, feedback_record
+from ._kinematics import hand_frame, psa
 from ._world import DEFAULT_WORLD, ObjectSpec, ObstacleSpec, WorldConfig
 
 __all__ = [
@@ -235,8 +235,8 @@ def _run_isolated(fn: Any, *args: Any) -> PreviewReport:
     loop gets a helper thread, joined synchronously: the caller's loop (and
     its clock) stands still meanwhile, which keeps virtual-time runs exact.
     """
-    clock = trio.testing.MockClock(autojump_threshold=0)
     if not trio.lowlevel.in_trio_run():
+        clock = trio.testing.MockClock(autojump_threshold=0)
         result: PreviewReport = trio.run(fn, *args, clock=clock)
         return result
     box: list[Any] = []
@@ -308,8 +308,6 @@ async def _regrasp(arm: SimulatedArm) -> None:
     takes zero samples and only records the grasp.  If it does not fit (the
     belief is inconsistent), nothing is done: closing would move the fingers.
     """
-    from ._kinematics import hand_frame, psa
-
     p, s, a = psa(hand_frame(arm.model, arm.joints))
     opening = arm.state().finger_opening
     if arm.world.between_fingers(p, s, a, opening) is not None:
@@ -329,12 +327,3 @@ def _steps(command: Command, home: WorldConfig) -> tuple[Command, ...]:
             Command(CommandCode.MOVE_JOINTS, home.initial_joints),
         )
     return (command,)
-
-
-def stand_error(state: ModelState) -> str | None:
-    """Why the model cannot stand in ``state`` (None when it can)."""
-    try:
-        SimulatedArm(state.world)
-    except ConfigError as exc:
-        return str(exc)
-    return None
