@@ -28,7 +28,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from tcpstream._commands import Feedback
+from tcpstream._commands import CommandCode, Feedback
 
 from ._control import CommandRecord, CommandState, TaskRun
 from ._kinematics import PUMA560, ArmModel
@@ -96,6 +96,9 @@ class ConsoleSnapshot:
     last_flag: str | None = None
     preview: str | None = None
     status: str | None = None
+    force: str | None = None
+    """Seed 004's force data as far as the arm reports it: the commanded grip
+    force while holding (SQUEEZE's reply) and the last weighed mass (WEIGH)."""
 
 
 def _bar(q: float, lo: float, hi: float) -> str:
@@ -200,6 +203,8 @@ def render_plain(s: ConsoleSnapshot) -> str:
                 f"{_time(r.done):>6}  {r.predicted:<5}  {r.label}"
                 + (f"  [{r.reason}]" if r.reason else "")
             )
+    if s.force:
+        lines.append("force: " + s.force)
     lines.append("link: " + _link_text(s.link))
     lines.append(_model_line(s))
     if s.status:
@@ -294,6 +299,8 @@ def render(s: ConsoleSnapshot, height: int | None = None) -> RenderableType:
             parts.append(
                 Text(f"   ({start} earlier, {len(s.commands) - stop} later commands not shown)")
             )
+    if s.force:
+        parts.append(Text("force: " + s.force))
     parts.append(Text("link: " + _link_text(s.link)))
     parts.append(Text(_model_line(s), style="bold red" if s.flagged else ""))
     if s.status:
@@ -524,4 +531,30 @@ class ConsoleSession:
             last_flag=self._last_flag,
             preview=None if self.preview is None else self._preview_text(self.preview),
             status=self.status,
+            force=self._force(),
         )
+
+    def _force(self) -> str | None:
+        """Grip force and weighed mass from the completed commands' replies."""
+        if self.run is None:
+            return None
+        grip: float | None = None
+        mass: float | None = None
+        for r in self.run.records:
+            if r.result is None:
+                continue
+            code = r.command.code
+            if code is CommandCode.SQUEEZE:
+                grip = r.result.aux[0]
+            elif code is CommandCode.WEIGH:
+                mass = r.result.aux[0]
+            elif code is CommandCode.OPEN_FINGERS and not (
+                r.result.feedback.tactile_left and r.result.feedback.tactile_right
+            ):
+                grip = None  # let go: no force on an object any more
+        parts = []
+        if grip is not None:
+            parts.append(f"gripping with {grip:.0f} N")
+        if mass is not None:
+            parts.append(f"weighed {mass:.3f} kg")
+        return ", ".join(parts) or None

@@ -20,6 +20,8 @@ from ._armserver import _read_key
 from ._config import ConfigError, DirectionConfig, LinkConfig
 from ._console_run import ConsoleOptions, run_console
 from ._demo import DemoOptions
+from ._preview import preview
+from ._tasks import rock_task
 from ._world import DEFAULT_WORLD, WorldConfig
 
 __all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
@@ -51,6 +53,11 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
         "--require-preview",
         action="store_true",
         help="send nothing if the local model predicts a refusal",
+    )
+    ap.add_argument(
+        "--preview-only",
+        action="store_true",
+        help="print what the local model predicts for the task and exit (connects to nothing)",
     )
     ap.add_argument("--log", metavar="FILE", help="write every state and command event (JSONL)")
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
@@ -84,7 +91,7 @@ def console_main(args: argparse.Namespace) -> int:
             link = config_from_args(args)
             preset = args.preset if args.config is None else str(args.config)
         else:
-            if args.transport == "serial" and not args.port:
+            if args.transport == "serial" and not args.port and not args.preview_only:
                 raise ConfigError("--port PATH is needed for the serial transport")
             rate = args.baud if args.transport == "serial" else None
             link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay or 0.0))
@@ -114,6 +121,8 @@ def console_main(args: argparse.Namespace) -> int:
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim console: {exc}", file=sys.stderr)
         return 2
+    if args.preview_only:
+        return _preview_only(world, as_json=args.json)
     try:
         result = run_console(options)
     except KeyboardInterrupt:
@@ -125,6 +134,28 @@ def console_main(args: argparse.Namespace) -> int:
     if result.error:
         print(f"linksim console: {result.error}", file=sys.stderr)
     return 0 if result.ok else 1
+
+
+def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
+    """``--preview-only``: the rock task on the local model; 0 when nothing is refused."""
+    report = preview(rock_task(world).commands, world)
+    if as_json:
+        json.dump(report.as_dict(), sys.stdout)
+        sys.stdout.write("\n")
+    else:
+        for o in report.outcomes:
+            verdict = "ok" if o.ok else f"{o.reason.name}: {o.message}"
+            print(
+                f"#{o.index:<2} {o.start:6.2f} s +{o.duration:5.2f} s  {o.label}: {verdict}",
+                file=sys.stderr,
+            )
+        p = ", ".join(f"{x:+.3f}" for x in report.final.p)
+        print(
+            f"{'OK' if report.ok else 'REFUSED'}: {report.duration:.2f} s of motion, "
+            f"ends with the hand at ({p}) m",
+            file=sys.stderr,
+        )
+    return 0 if report.ok else 1
 
 
 def add_plot_arguments(ap: argparse.ArgumentParser) -> None:

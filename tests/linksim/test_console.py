@@ -12,11 +12,19 @@ import re
 import pytest
 from rich.console import Console
 
-from linksim import DEFAULT_WORLD, ConsoleSnapshot, ObjectSpec
+from linksim import (
+    DEFAULT_WORLD,
+    ConsoleSession,
+    ConsoleSnapshot,
+    ObjectSpec,
+    TaskRun,
+    preview,
+    rock_task,
+)
 from linksim._cli import main
 from linksim._console import CommandRow, render, render_plain, render_text
 from linksim._kinematics import PUMA560
-from tcpstream import Feedback
+from tcpstream import CommandResult, Feedback
 
 HOME = Feedback(
     joints=DEFAULT_WORLD.initial_joints,
@@ -176,3 +184,65 @@ def test_live_queue_shows_a_window_that_fits_the_terminal() -> None:
     assert len(text.splitlines()) <= 24
     # Without a height (line output, the final frame) every command is shown.
     assert all(f"command {n}" in render_text(s) for n in range(1, 12))
+
+
+def test_preview_only_connects_to_nothing(
+    tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["console", "--preview-only", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["ok"] is True
+    assert report["duration_s"] == 9.128
+    assert [c["outcome"] for c in report["commands"]] == ["ok"] * 11
+    far = ObjectSpec("rock", (1.5, 0.0, -0.315), 0.07, 0.85)
+    path = tmp_path / "far.toml"
+    path.write_text(dataclasses.replace(DEFAULT_WORLD, objects=(far,)).to_toml())
+    assert main(["console", "--preview-only", "--world", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "#2 " in err
+    assert "UNREACHABLE: via point 1" in err
+    assert err.count("SKIPPED") == 9
+    assert err.rstrip().splitlines()[-1].startswith("REFUSED: 0.00 s of motion")
+
+
+def test_an_observer_session_shows_reports_and_predicts_nothing() -> None:
+    out = io.StringIO()
+    clock = iter(float(t) for t in range(100))
+    session = ConsoleSession(
+        "watch",
+        DEFAULT_WORLD,
+        run=None,
+        clock=lambda: next(clock),
+        origin=0.0,
+        out=out,
+        live=False,
+    )
+    with session:
+        session.telemetry(HOME)
+        session.telemetry(HOLDING)
+    snap = session.snapshot()
+    assert snap.mode == "observer"
+    assert snap.confirmed == HOLDING
+    assert snap.predicted is None
+    assert snap.comparisons == 0
+    text = out.getvalue()
+    assert "model: none (an observer does not see the commands" in text
+    # Line mode: one state line per second of the run's clock.
+    assert text.count("] state: joints (") == 2
+    assert "tactile LR" in text
+
+
+def test_force_line_from_squeeze_and_weigh_replies() -> None:
+    task = rock_task(DEFAULT_WORLD).commands
+    run = TaskRun(task)
+    plan = preview(task)
+    session = ConsoleSession(
+        "t", DEFAULT_WORLD, run=run, clock=lambda: 0.0, origin=0.0, out=io.StringIO(), live=False
+    )
+    for record, outcome in list(zip(run.records, plan.outcomes, strict=True))[:7]:
+        record.result = CommandResult(outcome.feedback, outcome.aux)
+    assert session.snapshot().force == "gripping with 20 N, weighed 0.850 kg"
+    for record, outcome in list(zip(run.records, plan.outcomes, strict=True))[7:]:
+        record.result = CommandResult(outcome.feedback, outcome.aux)
+    assert session.snapshot().force == "weighed 0.850 kg"  # let go in the bin
+    assert "force: weighed 0.850 kg" in render_plain(session.snapshot())
