@@ -8,7 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PKGS   := serialsocket tcpstream linksim
 
-.PHONY: demo test lint typecheck pytest fuzz bench bench-codec bench-goodput bench-pty bench-latency clean
+.PHONY: demo test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,8 +31,32 @@ typecheck: $(STAMP)
 pytest: $(STAMP)
 	$(PY) -m pytest -q
 
-fuzz: $(STAMP)
+# `make fuzz` runs the hypothesis property fuzzers, then each coverage-guided
+# atheris harness for FUZZ_SECONDS (default 60; the issue-11 runs used 600),
+# growing its corpus under fuzz/corpus/<harness>/.  A finding stops the run and
+# leaves crash-* in that folder; pin it as a regression test.
+FUZZ_SECONDS ?= 60
+HARNESSES    := fuzz_parser fuzz_arq_receive fuzz_command_packet fuzz_session
+
+fuzz-install: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[fuzz]'
+
+fuzz: fuzz-install
 	HYPOTHESIS_PROFILE=deep $(PY) -m pytest -q fuzz
+	@for h in $(HARNESSES); do \
+	  echo "== $$h ($(FUZZ_SECONDS) s)"; \
+	  mkdir -p fuzz/corpus/$$h; \
+	  timeout $$(( $(FUZZ_SECONDS) + 120 )) $(PY) -m fuzz.$$h -max_total_time=$(FUZZ_SECONDS) \
+	    -print_final_stats=1 -artifact_prefix=fuzz/corpus/$$h/ fuzz/corpus/$$h \
+	    2>&1 | grep -v '^INFO: Instrumenting' || exit 1; \
+	done
+
+# 24 simulated hours of demo traffic and bulk data over noisy-moon with outages
+# (virtual clock).  SOAK_HOURS shortens or lengthens it.
+SOAK_HOURS ?= 24
+
+soak: $(STAMP)
+	$(PY) -m linksim._soak --hours $(SOAK_HOURS)
 
 # Benchmarks measure speed; they are not tests.  `make bench` runs the quick ones.
 bench: bench-codec bench-pty bench-latency

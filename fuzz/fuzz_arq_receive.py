@@ -1,0 +1,147 @@
+"""atheris harness: the ARQ endpoint's receive path (serialsocket.Endpoint).
+
+Two endpoints connect honestly (A connects, B listens and accepts); then the
+fuzz input is read as a script of operations on B: well-formed packets of any
+type, sequence number and data (valid block check, so they reach the ARQ
+logic rather than dying in the parser), raw line bytes, time steps that fire
+due timers, application reads and writes on both sides, and honest exchanges
+of what each side queued.  Properties (any violation raises):
+
+* ``receive_data``, ``handle_timer``, ``data_to_send``, ``read`` and
+  ``statistics`` never raise, whatever arrives: a bad packet is counted;
+* the application calls raise only ``LocalProtocolError`` (a local misuse,
+  such as sending after ``send_eof``);
+* the receive buffer never holds more than ``receive_buffer`` bytes;
+* no timer stays due after it was handled and the output flushed (an event
+  loop driving the endpoint would spin).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+
+from fuzz._instrument import instrumented
+from fuzz._reader import Reader
+
+with instrumented(__name__ == "__main__"):
+    from serialsocket import (
+        EIGHT_BIT_CLEAN,
+        PRINTABLE,
+        BlockCheck,
+        ConnectionRequested,
+        Endpoint,
+        EndpointConfig,
+        LocalProtocolError,
+        Packet,
+        State,
+        build_packet,
+    )
+
+_TYPES = "DYNZEISBFXAR?"
+_TIMER_SPIN_LIMIT = 64
+"""Consecutive timer firings at one instant before it counts as a spin."""
+
+
+def _config(r: Reader) -> EndpointConfig:
+    return EndpointConfig(
+        window=1 + r.byte() % 31,
+        max_packet_length=40 + r.u16() % 1500,
+        encoding=(PRINTABLE, EIGHT_BIT_CLEAN)[r.byte() % 2],
+        one_way_delay=1.0,
+        line_rate=None,
+        receive_buffer=2 * 9031,
+        send_buffer=8192,
+    )
+
+
+def _fire(ep: Endpoint, now: float) -> bytes:
+    """Handle every due timer at ``now``; return what went out.  Raise on a spin."""
+    out = ep.data_to_send(now)
+    for _ in range(_TIMER_SPIN_LIMIT):
+        timers = [t for t in (ep.get_timer(), ep.get_send_timer()) if t is not None]
+        if not timers or min(timers) > now:
+            return out
+        ep.handle_timer(now)
+        out += ep.data_to_send(now)
+    raise AssertionError(f"timer spin at t={now} in state {ep.state}")
+
+
+def _connect(a: Endpoint, b: Endpoint) -> float:
+    now = 0.0
+    b.listen()
+    a.connect(now)
+    for _ in range(8):
+        b.receive_data(a.data_to_send(now), now)
+        for ev in b.events():
+            if isinstance(ev, ConnectionRequested):
+                b.accept(now)
+        a.receive_data(b.data_to_send(now), now)
+        a.events()
+        if a.state is State.ESTABLISHED and b.state is State.ESTABLISHED:
+            break
+        now += 1.0
+    return now
+
+
+def one_input(data: bytes) -> None:
+    r = Reader(data)
+    a = Endpoint(_config(r))
+    b = Endpoint(_config(r))
+    now = _connect(a, b)
+    check = BlockCheck.CRC16
+    while r.remaining:
+        op = r.byte() % 9
+        if op in (0, 1):  # a well-formed packet of any type, seq and (encoded or not) data
+            ptype = _TYPES[r.byte() % len(_TYPES)]
+            seq = r.byte() % 64
+            payload = r.take(r.byte()).replace(b"\x01", b"#")  # SOH never inside a packet
+            if op == 1 and ptype == "D":
+                payload = b.parameters.encoding.encode(payload) if b.parameters else payload
+            wire_check = check if r.byte() % 8 else BlockCheck.SUM6
+            b.receive_data(build_packet(Packet(seq=seq, type=ptype, data=payload), wire_check), now)
+        elif op == 2:  # raw bytes on the line
+            b.receive_data(r.take(r.byte()), now)
+        elif op == 3:  # time passes; timers fire on both sides
+            now += r.byte() * 0.25
+            _fire(a, now)
+            _fire(b, now)
+        elif op == 4:
+            got = b.read(r.byte() or None, now)
+            if b.readable > b.config.receive_buffer:
+                raise AssertionError(f"{b.readable} bytes buffered")
+            del got
+        elif op in (5, 6):
+            ep = b if op == 5 else a
+            # Sending after EOF or once the connection ended is a local misuse.
+            with contextlib.suppress(LocalProtocolError):
+                ep.send(r.take(r.byte()), now)
+        elif op == 7:  # an honest exchange
+            b.receive_data(_fire(a, now), now)
+            a.receive_data(_fire(b, now), now)
+        else:
+            verb = r.byte() % 4
+            try:
+                if verb == 0:
+                    b.send_eof(now)
+                elif verb == 1:
+                    b.close(now)
+                elif verb == 2:
+                    a.send_eof(now)
+                else:
+                    a.abort("fuzz", now)
+            except LocalProtocolError:
+                pass
+        b.events()
+        a.events()
+        b.statistics()
+        _fire(b, now)
+        if b.readable > b.config.receive_buffer:
+            raise AssertionError(f"{b.readable} bytes buffered")
+
+
+if __name__ == "__main__":
+    from fuzz._atheris import run
+
+    run(one_input)
+    sys.exit(0)
