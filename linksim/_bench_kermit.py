@@ -78,6 +78,8 @@ class TransferSetup:
         timeout: fixed timeout for both sides, s (Kermit TIME units: whole seconds).
         limit: hard limit for the whole transfer, s; stragglers are killed.
         seed: the relay's random seed.
+        seven_bit: treat the line as 7-bit: ours asks for 8th-bit prefixing,
+            C-Kermit and G-Kermit use parity space (which makes them ask too).
     """
 
     sender: str
@@ -90,6 +92,7 @@ class TransferSetup:
     timeout: int = 5
     limit: float = 120.0
     seed: int = 1
+    seven_bit: bool = False
 
 
 def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]) -> list[str]:
@@ -98,7 +101,7 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         f"set line {line}",
         "set carrier-watch off",
         "set flow none",
-        "set parity none",
+        "set parity space" if setup.seven_bit else "set parity none",
         "set streaming off",
         "set file type binary",
         "set transfer mode manual",
@@ -107,7 +110,6 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         "set attributes on",
         f"set window {setup.window}",
         f"set receive packet-length {setup.packet_length}",
-        f"set send packet-length {setup.packet_length}",
         "set block-check 3",
         f"set send timeout {setup.timeout} fixed",
         f"set receive timeout {setup.timeout}",
@@ -126,6 +128,8 @@ def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[s
     """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
     argv = ["gkermit", "-q", "-i", "-P", "-w", "-S", "-b", str(setup.timeout)]
     argv += ["-e", str(min(max(setup.packet_length, 40), 9000))]
+    if setup.seven_bit:
+        argv += ["-p", "s"]
     return [*argv, "-s", *map(str, files)] if files else [*argv, "-r"]
 
 
@@ -135,6 +139,7 @@ def _our_config(setup: TransferSetup) -> KermitConfig:
         window=setup.window,
         timeout=float(setup.timeout),
         retry_limit=20,
+        seven_bit=setup.seven_bit,
     )
 
 

@@ -36,6 +36,7 @@ ARQ, as C-Kermit does it (ckcfn2.c input()):
 from __future__ import annotations
 
 import enum
+import logging
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -63,6 +64,8 @@ __all__ = [
     "TransferComplete",
     "TransferFailed",
 ]
+
+log = logging.getLogger(__name__)
 
 _PLAIN = Encoding(qbin=None, rept=None)
 """Encoding for E packets sent before negotiation (controls prefixed, 8 bits raw)."""
@@ -272,10 +275,14 @@ class _Side:
         while not self.finished and (event := self._parser.next_event()) is not None:
             if not isinstance(event, PacketReceived):
                 self._damaged += 1
+                if log.isEnabledFor(logging.DEBUG):
+                    log.debug("%.3f <- damaged: %s %r", now, event.reason.value, event.raw[:12])
                 self._on_damage(now)
                 continue
             self._received += 1
             packet = event.packet
+            if log.isEnabledFor(logging.DEBUG):
+                log.debug("%.3f <- %s %d %r", now, packet.type, packet.seq, packet.data[:40])
             if packet.type == PacketType.ERROR:
                 text = self._decode_text(packet.data)
                 self._finish_failed(f"peer reported: {text}", by_peer=True)
@@ -352,9 +359,13 @@ class _Side:
             wire = build_packet(packet, neg.check, eol=neg.eol, padding=neg.padding)
         self._out += wire
         self._sent += 1
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("-> %s %d %r", packet.type, packet.seq, packet.data[:40])
         return wire
 
     def _resend(self, wire: bytes) -> None:
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("-> resend %r", wire[:6])
         self._out += wire
         self._sent += 1
         self._retransmissions += 1
@@ -437,7 +448,18 @@ class KermitSender(_Side):
         if packet.type == PacketType.ACK:
             slot = window.get(packet.seq)
             if slot is None or slot.acked:
-                return  # an old duplicate ACK
+                oldest = window.oldest()
+                if (
+                    window.size == 1
+                    and oldest is not None
+                    and packet.seq == (oldest.seq - 1) % SEQ_MODULUS
+                ):
+                    # Stop-and-wait: G-Kermit answers a damaged packet by
+                    # re-ACKing the one before it.  Resend now (gkermit.c does
+                    # the same for a "wrong sequence number") instead of
+                    # waiting out the timer.
+                    self._retransmit(oldest, now)
+                return  # otherwise an old duplicate ACK
             oldest = window.oldest()
             window.ack(packet.seq)
             self._deadline = now + self._timeout()

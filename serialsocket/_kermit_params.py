@@ -34,6 +34,13 @@ _CAP_LONG, _CAP_WINDOWS, _CAP_ATTRIBUTES = 2, 4, 8
 _WHATAMI_VALID, _WHATAMI_BINARY = 32, 2
 _NORMAL_PACKET = MAX_NORMAL_LEN + 2
 """96: the longest normal packet, MARK through CHECK (LEN = 94)."""
+_ADVERTISED_MAXL = MAX_NORMAL_LEN - 5
+"""89: the largest MAXL we advertise.  C-Kermit 10.0 Beta.08 (Debian's ckermit
+402~beta08) sends normal packets up to 5 characters longer than the MAXL it was
+given (measured here: MAXL 80 -> LEN 85, 88 -> 93, 91 -> 96; davidrg/ckwin
+#558), and past 94 it still builds them as *normal* packets with LEN 95+,
+which no Kermit can read (ckwin #559).  Asking for at most 89 keeps its packets
+legal; our parser accepts the extra characters (see _PARSER_SLACK)."""
 MAX_KERMIT_WINDOW = 31
 """The window field is one tochar; 31 is the protocol's limit (E-Kermit P_WSLOTS, ckcker.h)."""
 _DEFAULT_PEER_TIMEOUT = 7.0
@@ -146,7 +153,7 @@ class KermitInit:
         n = min(self.max_packet_length - 7, 94 * 95 + 94)
         return bytes(
             [
-                tochar(min(MAX_NORMAL_LEN, self.max_packet_length - 2)),
+                tochar(min(_ADVERTISED_MAXL, self.max_packet_length - 2)),
                 tochar(min(94, max(1, round(self.timeout)))),
                 tochar(self.npad),
                 ctl(self.padc),
