@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import pathlib
 import sys
 from typing import Any
 
@@ -140,7 +141,7 @@ def arm_server_main(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
     try:
-        world = WorldConfig.from_toml(args.world) if args.world else DEFAULT_WORLD
+        world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
         key = _read_key(args.key_file) if args.key_file else None
         rate = args.rate or (args.baud if args.transport == "serial" else None)
         link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay))

@@ -8,6 +8,7 @@ bad options.
 from __future__ import annotations
 
 import argparse
+import pathlib
 import sys
 from typing import Any
 
@@ -67,7 +68,7 @@ def add_demo_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def _world(args: argparse.Namespace) -> WorldConfig:
-    return WorldConfig.from_toml(args.world) if args.world else DEFAULT_WORLD
+    return WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
 
 
 def _finish(report: DemoReport, args: argparse.Namespace, prog: str) -> int:

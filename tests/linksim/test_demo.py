@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import pathlib
 import subprocess
 import sys
 
@@ -168,3 +169,16 @@ def test_arm_server_and_control_as_two_programs() -> None:
         if server.poll() is None:
             server.kill()
             server.wait()
+
+
+def test_cli_reads_a_world_file(tmp_path: pathlib.Path) -> None:
+    world = tmp_path / "world.toml"
+    world.write_text(DEFAULT_WORLD.to_toml())
+    done = run_cli("demo", "--virtual", "--json", "--world", str(world))
+    assert done.returncode == 0, done.stderr
+    assert_task_done(json.loads(done.stdout))
+    bad = tmp_path / "bad.toml"
+    bad.write_text("speed = 7\n")
+    done = run_cli("demo", "--virtual", "--world", str(bad))
+    assert done.returncode == 2
+    assert "speed" in done.stderr
