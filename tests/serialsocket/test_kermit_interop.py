@@ -1,0 +1,114 @@
+"""Interop: our Kermit file transfer against C-Kermit and G-Kermit through ``linksim relay``.
+
+Every transfer runs the real programs (Debian's ``ckermit`` and ``gkermit``,
+installed by .ci/run) on one pty of an in-process relay and ours on the other,
+and compares every received file byte for byte.  The matrix, per peer and per
+direction:
+
+* clean line, window 1, 94-character packets (normal packets only);
+* 7-bit line (the peer on parity space, ours asking for 8th-bit prefixes),
+  window 8, long packets;
+* 0.1 s delay each way and a byte error rate of 1e-4, window 8 (G-Kermit has
+  no windows, so 1), 1000-character packets (slow: marked so).
+
+Files: every byte value, long runs of NUL, prefix characters and 0xFE/0xFF,
+random binary, and text with CRLF/LF line ends.  They are small (~20 KB) so
+the delayed cases stay within a few seconds each.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import random
+
+import pytest
+
+from linksim._bench_kermit import TransferSetup, available, run_transfer
+
+_REASON = {
+    "ckermit": "ckermit not installed: .ci/run installs it (apt-get install ckermit); "
+    "that failed or was not run",
+    "gkermit": "gkermit not installed: .ci/run installs it (apt-get install gkermit); "
+    "that failed or was not run",
+}
+
+
+def _files(directory: pathlib.Path, size: int) -> list[pathlib.Path]:
+    """A binary file (every byte value, long runs, random) and a text file, ~size bytes each."""
+    rng = random.Random(size)
+    binary = (
+        bytes(range(256)) * 4
+        + b"\x00" * 500
+        + b"#" * 200
+        + b"~" * 150
+        + b"&" * 100
+        + b"\xfe" * 300
+        + b"\xff" * 200
+        + b"\x01\r\n" * 50
+    )
+    binary += rng.randbytes(max(0, size - len(binary)))
+    words = [b"kermit", b"packet", b"line", b"\r\n", b"\n", b"        ", b"#include", b"~~~~"]
+    text = b" ".join(rng.choice(words) for _ in range(size // 6))[:size]
+    directory.mkdir()
+    paths = [directory / "all-bytes.bin", directory / "notes.txt"]
+    for path, data in zip(paths, (binary, text), strict=True):
+        path.write_bytes(data)
+    return paths
+
+
+def _transfer(tmp_path: pathlib.Path, setup: TransferSetup, size: int) -> None:
+    for peer in (setup.sender, setup.receiver):
+        if not available(peer):
+            pytest.skip(_REASON[peer])
+    files = _files(tmp_path / "src", size)
+    out = tmp_path / "out"
+    out.mkdir()
+    run_transfer(setup, files, out)  # raises on failure or on any differing byte
+    for f in files:
+        assert (out / f.name).read_bytes() == f.read_bytes()
+
+
+PAIRS = [
+    ("ours", "ckermit"),
+    ("ckermit", "ours"),
+    ("ours", "gkermit"),
+    ("gkermit", "ours"),
+]
+
+
+@pytest.mark.parametrize(("sender", "receiver"), PAIRS)
+def test_clean_line_window_1_normal_packets(
+    tmp_path: pathlib.Path, sender: str, receiver: str
+) -> None:
+    setup = TransferSetup(sender=sender, receiver=receiver, window=1, packet_length=94, limit=60)
+    _transfer(tmp_path, setup, 20_000)
+
+
+@pytest.mark.parametrize(("sender", "receiver"), PAIRS)
+def test_seven_bit_line_uses_8th_bit_prefixing(
+    tmp_path: pathlib.Path, sender: str, receiver: str
+) -> None:
+    setup = TransferSetup(
+        sender=sender, receiver=receiver, window=8, packet_length=1000, seven_bit=True, limit=60
+    )
+    _transfer(tmp_path, setup, 20_000)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sender", "receiver"), PAIRS)
+def test_delayed_noisy_line_window_8_long_packets(
+    tmp_path: pathlib.Path, sender: str, receiver: str
+) -> None:
+    setup = TransferSetup(
+        sender=sender,
+        receiver=receiver,
+        window=8,
+        packet_length=1000,
+        delay=0.1,
+        byte_error_rate=1e-4,
+        timeout=3,
+        limit=120,
+    )
+    # G-Kermit is stop-and-wait (no windows): every 1000-character packet costs
+    # a 0.2 s round trip, so it gets smaller files.
+    _transfer(tmp_path, setup, 8_000 if "gkermit" in (sender, receiver) else 20_000)
