@@ -33,9 +33,7 @@ from dataclasses import dataclass
 
 import trio
 
-from serialsocket import open_port
-from serialsocket._kermit_io import kermit_receive, kermit_send
-from serialsocket._kermit_params import KermitConfig
+from serialsocket import KermitConfig, kermit_receive, kermit_send, open_port
 
 from ._config import DirectionConfig, LinkConfig
 from ._relay import run_relay

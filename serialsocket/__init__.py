@@ -13,6 +13,11 @@ sans-I/O: bytes and ``now`` in, bytes, events and timer deadlines out.
 :class:`SerialSocket` (``connect``, ``accept``, ``listen``, ``serve``) runs
 the endpoint over a port as a trio ``HalfCloseableStream``;
 :class:`BlockingSerialSocket` offers the same to code that is not async.
+
+Kermit file transfer on the same packet layer: :class:`KermitSender` and
+:class:`KermitReceiver` (sans-I/O), :func:`kermit_send` and
+:func:`kermit_receive` over a port; interoperates with C-Kermit and G-Kermit
+(``python -m serialsocket kermit send|receive``; serialsocket/KERMIT.md).
 """
 
 from ._blocking import BlockingSerialSocket as BlockingSerialSocket
@@ -48,6 +53,21 @@ from ._hayes import NoDialtone as NoDialtone
 from ._hayes import answer as answer
 from ._hayes import dial as dial
 from ._hayes import hangup as hangup
+from ._kermit import FileCompleted as FileCompleted
+from ._kermit import FileData as FileData
+from ._kermit import FileStarted as FileStarted
+from ._kermit import KermitEvent as KermitEvent
+from ._kermit import KermitReceiver as KermitReceiver
+from ._kermit import KermitSender as KermitSender
+from ._kermit import KermitState as KermitState
+from ._kermit import KermitStatistics as KermitStatistics
+from ._kermit import OutgoingFile as OutgoingFile
+from ._kermit import TransferComplete as TransferComplete
+from ._kermit import TransferFailed as TransferFailed
+from ._kermit_io import KermitTransferError as KermitTransferError
+from ._kermit_io import kermit_receive as kermit_receive
+from ._kermit_io import kermit_send as kermit_send
+from ._kermit_params import KermitConfig as KermitConfig
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity
@@ -104,7 +124,17 @@ __all__ = [
     "EndpointConfig",
     "EndpointStatistics",
     "Event",
+    "FileCompleted",
+    "FileData",
+    "FileStarted",
     "InitParameters",
+    "KermitConfig",
+    "KermitEvent",
+    "KermitReceiver",
+    "KermitSender",
+    "KermitState",
+    "KermitStatistics",
+    "KermitTransferError",
     "LineBusy",
     "LineFailed",
     "LinkBroken",
@@ -119,6 +149,7 @@ __all__ = [
     "NoAnswer",
     "NoCarrier",
     "NoDialtone",
+    "OutgoingFile",
     "Packet",
     "PacketParser",
     "PacketReceived",
@@ -136,6 +167,8 @@ __all__ = [
     "SerialSocket",
     "SocketStatistics",
     "State",
+    "TransferComplete",
+    "TransferFailed",
     "accept",
     "answer",
     "build_packet",
@@ -145,6 +178,8 @@ __all__ = [
     "data_capacity",
     "dial",
     "hangup",
+    "kermit_receive",
+    "kermit_send",
     "listen",
     "open_port",
     "open_pty_pair",

@@ -21,6 +21,9 @@ SANS_IO = [
     "_endpoint",
     "_errors",
     "_events",
+    "_kermit",
+    "_kermit_params",
+    "_kermit_window",
     "_packet",
     "_params",
     "_parser",
@@ -140,6 +143,22 @@ def test_public_names_are_pinned() -> None:
             "dial",
             "hangup",
             "BlockingSerialSocket",
+            # Kermit file transfer
+            "FileCompleted",
+            "FileData",
+            "FileStarted",
+            "KermitConfig",
+            "KermitEvent",
+            "KermitReceiver",
+            "KermitSender",
+            "KermitState",
+            "KermitStatistics",
+            "KermitTransferError",
+            "OutgoingFile",
+            "TransferComplete",
+            "TransferFailed",
+            "kermit_receive",
+            "kermit_send",
         ]
     )
     for name in serialsocket.__all__:
