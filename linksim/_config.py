@@ -40,13 +40,18 @@ class ConfigError(ValueError):
     """A link parameter is out of range or malformed (the message names the field)."""
 
 
+def _is_number(value: object) -> bool:
+    """An int or float, but not a bool (TOML ``true`` must not read as 1)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
 def _check_probability(name: str, value: float) -> None:
-    if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+    if not (_is_number(value) and 0.0 <= value <= 1.0):
         raise ConfigError(f"{name} must be a probability in [0, 1], got {value!r}")
 
 
 def _check_nonnegative(name: str, value: float) -> None:
-    if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
+    if not (_is_number(value) and math.isfinite(value) and value >= 0.0):
         raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
@@ -74,7 +79,7 @@ class GilbertElliott:
             _check_probability(f"burst.{name}", getattr(self, name))
         for name in ("p_good_to_bad", "p_bad_to_good"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and 0.0 < value <= 1.0):
+            if not (_is_number(value) and 0.0 < value <= 1.0):
                 raise ConfigError(f"burst.{name} must be in (0, 1], got {value!r}")
 
 
@@ -187,12 +192,16 @@ class DirectionConfig:
 
     def __post_init__(self) -> None:
         if self.rate is not None and not (
-            isinstance(self.rate, int | float) and math.isfinite(self.rate) and self.rate > 0
+            _is_number(self.rate) and math.isfinite(self.rate) and self.rate > 0
         ):
             raise ConfigError(
                 f"rate must be a finite number of bit/s > 0 or None, got {self.rate!r}"
             )
-        if not (isinstance(self.bits_per_char, int) and 1 <= self.bits_per_char <= 64):
+        if not (
+            _is_number(self.bits_per_char)
+            and isinstance(self.bits_per_char, int)
+            and 1 <= self.bits_per_char <= 64
+        ):
             raise ConfigError(
                 f"bits_per_char must be an integer in [1, 64], got {self.bits_per_char!r}"
             )
@@ -252,7 +261,7 @@ class LinkConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.seed, int) or self.seed < 0:
+        if not (isinstance(self.seed, int) and _is_number(self.seed)) or self.seed < 0:
             raise ConfigError(f"seed must be an integer >= 0, got {self.seed!r}")
 
     @classmethod
@@ -282,7 +291,13 @@ class LinkConfig:
         ``action = "drop" | "corrupt" | "insert"`` and byte strings given as
         text (each character one byte, ``"\\u0001"`` for SOH).
         """
-        text = source.read_text() if isinstance(source, pathlib.Path) else source
+        if isinstance(source, pathlib.Path):
+            try:
+                text = source.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                raise ConfigError(f"cannot read {source}: {exc}") from exc
+        else:
+            text = source
         try:
             doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
