@@ -33,13 +33,14 @@ from dataclasses import dataclass
 
 import trio
 
-from serialsocket import KermitConfig, kermit_receive, kermit_send, open_port
+from serialsocket import KermitConfig, KermitStatistics, kermit_receive, kermit_send, open_port
 
 from ._config import DirectionConfig, LinkConfig
 from ._relay import run_relay
 
 __all__ = [
     "PEERS",
+    "TransferResult",
     "TransferSetup",
     "add_arguments",
     "available",
@@ -141,6 +142,14 @@ def _our_config(setup: TransferSetup) -> KermitConfig:
     )
 
 
+@dataclass(frozen=True, slots=True)
+class TransferResult:
+    """What one transfer measured: seconds, and our side's counters if it took part."""
+
+    seconds: float
+    ours: KermitStatistics | None
+
+
 async def _run_peer(
     peer: str,
     setup: TransferSetup,
@@ -148,15 +157,19 @@ async def _run_peer(
     files: Sequence[pathlib.Path],
     directory: pathlib.Path,
     log: list[str],
+    ours: list[KermitStatistics],
 ) -> None:
-    """Run one side to completion; raises on failure (with the program's output)."""
+    """Run one side to completion; raises on failure (with the program's output).
+
+    Our side's final counters are appended to ``ours``.
+    """
     if peer == "ours":
         port = await open_port(line)
         async with port:
             if files:
-                await kermit_send(port, files, _our_config(setup))
+                ours.append(await kermit_send(port, files, _our_config(setup)))
             else:
-                await kermit_receive(port, directory, _our_config(setup))
+                ours.append(await kermit_receive(port, directory, _our_config(setup)))
         return
     if peer == "ckermit":
         argv = _ckermit_argv(setup, line, files)
@@ -187,12 +200,13 @@ async def _run_peer(
 
 async def _transfer(
     setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
-) -> float:
+) -> TransferResult:
     direction = DirectionConfig(
         rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
     )
     config = LinkConfig.symmetric(direction, seed=setup.seed)
     log: list[str] = []
+    ours: list[KermitStatistics] = []
     with trio.fail_after(setup.limit):
         async with trio.open_nursery() as nursery:
             stop = trio.Event()
@@ -211,7 +225,7 @@ async def _transfer(
 
             async def receiver() -> None:
                 try:
-                    await _run_peer(setup.receiver, setup, line_b, [], out_dir, log)
+                    await _run_peer(setup.receiver, setup, line_b, [], out_dir, log, ours)
                 except Exception as exc:
                     errors.append(exc)
                 done.set()
@@ -220,7 +234,7 @@ async def _transfer(
             await trio.sleep(_START_GAP)
             t0 = time.perf_counter()
             try:
-                await _run_peer(setup.sender, setup, line_a, files, out_dir.parent, log)
+                await _run_peer(setup.sender, setup, line_a, files, out_dir.parent, log, ours)
             except Exception as exc:
                 errors.append(exc)
             with trio.move_on_after(max(4 * setup.timeout, 10)):
@@ -232,22 +246,23 @@ async def _transfer(
         errors.append(RuntimeError(f"the {setup.receiver} receiver did not finish"))
     if errors:
         raise RuntimeError(f"{setup.sender}->{setup.receiver} failed: {errors[0]}") from errors[0]
-    return elapsed
+    return TransferResult(seconds=elapsed, ours=ours[0] if ours else None)
 
 
 def run_transfer(
     setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
-) -> float:
+) -> TransferResult:
     """Send ``files`` (which must not be in ``out_dir``) and check what arrives.
 
     Returns:
-        Seconds from starting the sender to the receiver's exit.
+        The time from starting the sender to the receiver's exit, and our
+        side's counters (None when neither side is ours).
 
     Raises:
         RuntimeError: a side failed or timed out (message includes its output).
         AssertionError: a received file differs from the original.
     """
-    elapsed = trio.run(_transfer, setup, files, out_dir)
+    result = trio.run(_transfer, setup, files, out_dir)
     for f in files:
         got = (out_dir / f.name).read_bytes()
         if got != f.read_bytes():
@@ -255,7 +270,7 @@ def run_transfer(
                 f"{f.name}: received {len(got)} bytes that differ from the "
                 f"{f.stat().st_size} sent ({setup.sender}->{setup.receiver})"
             )
-    return elapsed
+    return result
 
 
 def _measure(
@@ -263,6 +278,7 @@ def _measure(
 ) -> dict[str, object]:
     sender, receiver = pair.split("->")
     times: list[float] = []
+    counters: list[dict[str, int]] = []
     for run in range(args.runs):
         src = workdir / f"src{run}"
         out = workdir / f"out-{pair.replace('->', '-')}-{run}"
@@ -282,7 +298,22 @@ def _measure(
             limit=args.limit,
             seed=args.seed + run,
         )
-        times.append(run_transfer(setup, [path], out))
+        result = run_transfer(setup, [path], out)
+        times.append(result.seconds)
+        if result.ours is not None:
+            st = result.ours
+            counters.append(
+                {
+                    "timeouts": st.timeouts,
+                    "retransmissions": st.retransmissions,
+                    "naks_sent": st.naks_sent,
+                    "naks_received": st.naks_received,
+                    "damaged": st.damaged,
+                    "packets_sent": st.packets_sent,
+                    "window": st.window,
+                    "packet_length": st.packet_length,
+                }
+            )
         shutil.rmtree(out)
     median = statistics.median(times)
     return {
@@ -291,6 +322,7 @@ def _measure(
         "seconds": [round(t, 3) for t in times],
         "median_seconds": round(median, 3),
         "goodput_Bps": round(len(data) / median, 1),
+        "ours": counters,
     }
 
 
