@@ -22,10 +22,11 @@ ARQ, as C-Kermit does it (ckcfn2.c input()):
 * The sender resends exactly the packet a NAK names, or window-low on a
   timeout.  A NAK for the packet after the last one sent means everything was
   received (NAK(n+1) = ACK(n)), except while waiting for the ACK of S.  When
-  an ACK for a later packet arrives while window-low has never been resent,
-  window-low is resent once at once (the 1985 windowing draft's heuristic): the
-  line keeps order, so its ACK was lost, and waiting for a timeout would stall
-  the window for seconds on a delayed link.
+  an ACK arrives for a packet whose every copy was sent after window-low's
+  last copy, window-low is resent at once: the line keeps order, so that copy
+  or its ACK was lost, and waiting for a timeout would stall the window for
+  seconds on a delayed link.  (This generalises the 1985 windowing draft's
+  heuristic, which did it once, for a packet never resent.)
 * The receiver ACKs every in-window packet on arrival, buffers out-of-order
   ones, NAKs the oldest gap not NAKed yet, re-ACKs duplicates from the
   previous window, and on a timeout or a damaged packet NAKs window-low.
@@ -432,6 +433,7 @@ class KermitSender(_Side):
         self._discard = False
         self._window = SendWindow(1)
         self._seq = 0
+        self._transmissions = 0  # orders every copy sent, for the lost-copy rule
         self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
 
     def _error_seq(self) -> int:
@@ -440,7 +442,9 @@ class KermitSender(_Side):
     def _send(self, ptype: str, data: bytes, now: float, *, init: bool = False) -> None:
         seq = self._seq
         self._seq = (seq + 1) % SEQ_MODULUS
-        self._window.push(seq, self._emit(Packet(seq=seq, type=ptype, data=data), init=init))
+        self._transmissions += 1
+        wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
+        self._window.push(seq, wire, self._transmissions)
         self._deadline = now + self._timeout()
 
     def _on_packet(self, packet: Packet, now: float) -> None:
@@ -463,9 +467,14 @@ class KermitSender(_Side):
             oldest = window.oldest()
             window.ack(packet.seq)
             self._deadline = now + self._timeout()
-            if oldest is not None and oldest.seq != packet.seq and oldest.retries == 0:
-                oldest.retries += 1  # later ACK first: the old ACK was lost (see module doc)
-                self._resend(oldest.wire)
+            if oldest is not None and slot.first_sent > oldest.last_sent:
+                # Every copy of the packet just ACKed left after window-low's
+                # last copy, and the line keeps order: that copy or its ACK
+                # was lost (see the module doc).  A receiver NAKs a gap only
+                # once, so without this a second loss waits out the timer.
+                self._retransmit(oldest, now)
+                if self.finished:
+                    return
             self._after_ack(packet, now)
         elif packet.type == PacketType.NAK:
             self._naks_received += 1
@@ -594,6 +603,8 @@ class KermitSender(_Side):
             self.abort("Too many retries", message=f"too many retries ({limit}): the link is down")
             return
         slot.retries += 1
+        self._transmissions += 1
+        slot.last_sent = self._transmissions
         self._resend(slot.wire)
         self._deadline = now + self._timeout()
 

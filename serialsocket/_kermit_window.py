@@ -27,12 +27,17 @@ class SendSlot:
     Attributes:
         seq: its sequence number.
         wire: its exact bytes on the line (resent as they are).
+        first_sent, last_sent: positions of its first and latest copy in
+            the sender's sequence of transmissions (to tell which copies an
+            ACK for a later packet proves lost).
         retries: retransmissions so far.
         acked: an ACK arrived (the slot stays until every older slot is acked).
     """
 
     seq: int
     wire: bytes
+    first_sent: int
+    last_sent: int
     retries: int = 0
     acked: bool = False
 
@@ -56,9 +61,9 @@ class SendWindow:
         """No room for another packet."""
         return len(self._slots) >= self.size
 
-    def push(self, seq: int, wire: bytes) -> None:
-        """Record a newly sent packet."""
-        self._slots[seq] = SendSlot(seq, wire)
+    def push(self, seq: int, wire: bytes, sent: int) -> None:
+        """Record a newly sent packet, ``sent`` being its transmission number."""
+        self._slots[seq] = SendSlot(seq, wire, sent, sent)
 
     def get(self, seq: int) -> SendSlot | None:
         """The outstanding slot with this sequence number, if any."""

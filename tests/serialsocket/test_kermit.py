@@ -368,3 +368,26 @@ def test_cli_reports_a_port_that_cannot_be_opened(
 ) -> None:
     assert cli_main(["kermit", "receive", str(tmp_path), "--port", "/nonexistent/tty"]) == 2
     assert "/nonexistent/tty" in capsys.readouterr().err
+
+
+def test_ack_for_a_later_packet_resends_window_low_once_per_lost_copy() -> None:
+    config = KermitConfig(window=8, max_packet_length=96, attributes=False, timeout=10.0)
+    data = b"".join(b"line %04d\n" % i for i in range(200))
+    sender = KermitSender([OutgoingFile("t", len(data), io.BytesIO(data))], config, 0.0)
+    sender.data_to_send()
+    sender.receive_data(_ack_s(config), 0.1)
+    sender.data_to_send()  # F, seq 1
+
+    def ack(seq: int, t: float) -> bytes:
+        sender.receive_data(build_packet(Packet(seq=seq, type="Y"), BlockCheck.CRC16), t)
+        return sender.data_to_send()
+
+    burst = ack(1, 0.2)  # D 2..9 fill the window
+    assert burst.count(b"\x01") == 8
+    d2 = burst[: burst.index(b"\x01", 1)]
+    assert ack(3, 0.3) == d2  # D 3 acked, D 2 not: its copy or its ACK was lost
+    assert ack(4, 0.3) == b""  # D 4 left before the resend of D 2: proves nothing new
+    assert sender.statistics().retransmissions == 1
+    after = ack(2, 0.5)  # the resend got through: the window slides by 3
+    assert after.count(b"\x01") == 3
+    assert sender.statistics().timeouts == 0
