@@ -18,6 +18,7 @@ from . import (
     _armserver,
     _bench_codec,
     _bench_goodput,
+    _bench_kermit,
     _bench_latency,
     _bench_pty,
     _bench_relay,
@@ -233,6 +234,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _bench_pty.add_arguments(bpty)
     bpty.set_defaults(func=_bench_pty.main)
+    bkermit = bench_sub.add_parser(
+        "kermit", help="Kermit file transfer: ours vs C-Kermit through the relay (wall clock)"
+    )
+    _bench_kermit.add_arguments(bkermit)
+    bkermit.set_defaults(func=_bench_kermit.main)
     latency = bench_sub.add_parser(
         "latency", help="command round trip over loopback TCP beside a raw echo (wall clock)"
     )
