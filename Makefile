@@ -46,9 +46,11 @@ fuzz: fuzz-install
 	@for h in $(HARNESSES); do \
 	  echo "== $$h ($(FUZZ_SECONDS) s)"; \
 	  mkdir -p fuzz/corpus/$$h; \
+	  log=$${TMPDIR:-/tmp}/telelink-$$h.log; \
 	  timeout $$(( $(FUZZ_SECONDS) + 120 )) $(PY) -m fuzz.$$h -max_total_time=$(FUZZ_SECONDS) \
-	    -print_final_stats=1 -artifact_prefix=fuzz/corpus/$$h/ fuzz/corpus/$$h \
-	    2>&1 | grep -v '^INFO: Instrumenting' || exit 1; \
+	    -print_final_stats=1 -artifact_prefix=fuzz/corpus/$$h/ fuzz/corpus/$$h >$$log 2>&1; \
+	  rc=$$?; grep -v '^"' $$log | grep -v 'INFO: Instrumenting' | tail -15; \
+	  [ $$rc -eq 0 ] || { echo "$$h failed (exit $$rc): see $$log"; exit $$rc; }; \
 	done
 
 # 24 simulated hours of demo traffic and bulk data over noisy-moon with outages
