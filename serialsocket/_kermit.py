@@ -76,6 +76,11 @@ sending LENX 1000 after we advertised 999 (reference/kermit.md section 4)."""
 _READ_AHEAD = 8
 """File bytes buffered ahead of the encoder, in data fields: enough for a
 window's refill without a read per packet, bounded by 8 x 9024 bytes."""
+_BREAK_RETRIES = 2
+"""Copies of B resent before the sender stops waiting for its ACK.  Every file
+is already acknowledged by then, and C-Kermit and G-Kermit exit as soon as
+they have ACKed B: a lost ACK would otherwise cost retry-limit x timeout and
+end in a spurious failure (seen through the relay at a byte error rate of 1e-4)."""
 _MAX_ERROR_TEXT = 80
 """E-packet messages are cut to this many characters: they must fit a normal packet."""
 
@@ -167,7 +172,15 @@ class FileCompleted:
 
 @dataclass(frozen=True, slots=True)
 class TransferComplete:
-    """The batch ended normally (B exchanged)."""
+    """The batch ended normally: every file's Z was acknowledged and B was sent.
+
+    ``break_acknowledged`` is False when the sender stopped waiting for the
+    ACK of B (it came back damaged, or :data:`_BREAK_RETRIES` copies of B went
+    unanswered): the receiver had already acknowledged every file, and most
+    Kermit receivers exit right after ACKing B, so nothing could repair it.
+    """
+
+    break_acknowledged: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -581,13 +594,25 @@ class KermitSender(_Side):
             self._send(PacketType.EOF, b"D" if self._discard else b"", now)
 
     def _on_damage(self, now: float) -> None:
-        # Stop-and-wait: a damaged reply means "resend" (gkermit.c); with a
-        # window the receiver's NAKs and the timer repair instead.
-        if len(self._window) and self._window.size == 1:
+        if self._state is KermitState.SEND_BREAK:
+            # The receiver answered B; the answer was damaged.  See _BREAK_RETRIES.
+            self._break_unacknowledged()
+        elif len(self._window) and self._window.size == 1:
+            # Stop-and-wait: a damaged reply means "resend" (gkermit.c); with a
+            # window the receiver's NAKs and the timer repair instead.
             self._retransmit_oldest(now)
 
     def _on_timeout(self, now: float) -> None:
-        self._retransmit_oldest(now)
+        slot = self._window.oldest()
+        if self._state is KermitState.SEND_BREAK and slot and slot.retries >= _BREAK_RETRIES:
+            self._break_unacknowledged()
+        else:
+            self._retransmit_oldest(now)
+
+    def _break_unacknowledged(self) -> None:
+        self._goto(KermitState.DONE)
+        self._deadline = None
+        self._events.append(TransferComplete(break_acknowledged=False))
 
     def _retransmit_oldest(self, now: float) -> None:
         slot = self._window.oldest()

@@ -201,6 +201,9 @@ def _log_event(event: KermitEvent) -> None:
     elif isinstance(event, FileCompleted):
         log.info("file %s %s", event.name, "discarded" if event.discarded else "complete")
     elif isinstance(event, TransferComplete):
-        log.info("transfer complete")
+        if event.break_acknowledged:
+            log.info("transfer complete")
+        else:
+            log.info("transfer complete (every file acknowledged; the ACK of B was lost)")
     elif isinstance(event, TransferFailed):
         log.warning("transfer failed: %s", event.message)

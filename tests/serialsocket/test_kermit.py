@@ -391,3 +391,32 @@ def test_ack_for_a_later_packet_resends_window_low_once_per_lost_copy() -> None:
     after = ack(2, 0.5)  # the resend got through: the window slides by 3
     assert after.count(b"\x01") == 3
     assert sender.statistics().timeouts == 0
+
+
+def _sender_at_break(config: KermitConfig) -> tuple[KermitSender, bytes]:
+    sender = KermitSender([], config, 0.0)
+    sender.data_to_send()
+    sender.receive_data(_ack_s(config), 1.0)
+    b = sender.data_to_send()
+    assert b == build_packet(Packet(seq=1, type="B"), BlockCheck.CRC16)
+    return sender, b
+
+
+def test_damaged_ack_of_break_ends_the_batch_without_waiting() -> None:
+    # Captured through the relay: the ACK of B with its SEQ byte hit (bad header).
+    sender, _ = _sender_at_break(KermitConfig(timeout=5.0))
+    sender.receive_data(b"\x01%\xe7Y*A)\r", 2.0)
+    assert sender.next_event() == TransferComplete(break_acknowledged=False)
+    assert sender.state is KermitState.DONE
+    assert sender.data_to_send() == b""
+
+
+def test_unanswered_break_is_resent_twice_then_the_batch_ends() -> None:
+    sender, b = _sender_at_break(KermitConfig(timeout=5.0, retry_limit=10))
+    sender.handle_timer(6.0)
+    sender.handle_timer(11.0)
+    assert sender.data_to_send() == b + b
+    sender.handle_timer(16.0)
+    assert sender.data_to_send() == b""
+    assert sender.next_event() == TransferComplete(break_acknowledged=False)
+    assert sender.get_timer() is None
