@@ -211,6 +211,9 @@ class KermitStatistics:
         timeouts: timer expiries.
         damaged: packets or garbage runs the parser rejected.
         bytes_sent, bytes_received: line bytes.
+        eighth_bit_prefix: the agreed 8th-bit prefix (``&``), or None when
+            8-bit bytes travel raw (or before the exchange).
+        repeat_prefix: the agreed repeat prefix (``~``), or None.
     """
 
     state: KermitState
@@ -228,6 +231,8 @@ class KermitStatistics:
     damaged: int
     bytes_sent: int
     bytes_received: int
+    eighth_bit_prefix: str | None
+    repeat_prefix: str | None
 
 
 class _Side:
@@ -342,6 +347,8 @@ class _Side:
             damaged=self._damaged,
             bytes_sent=self._bytes_sent,
             bytes_received=self._bytes_received,
+            eighth_bit_prefix=_prefix(neg.send_encoding.qbin if neg else None),
+            repeat_prefix=_prefix(neg.send_encoding.rept if neg else None),
         )
 
     # -- shared internals -------------------------------------------------------
@@ -747,6 +754,10 @@ class KermitReceiver(_Side):
             return
         self._window.forget_naks()
         self._nak(self._window.low)
+
+
+def _prefix(c: int | None) -> str | None:
+    return None if c is None else chr(c)
 
 
 def _attribute_size(field: bytes) -> int | None:

@@ -24,6 +24,7 @@ import random
 import pytest
 
 from linksim._bench_kermit import TransferSetup, available, run_transfer
+from serialsocket import KermitStatistics
 
 _REASON = {
     "ckermit": "ckermit not installed: .ci/run installs it (apt-get install ckermit); "
@@ -56,16 +57,22 @@ def _files(directory: pathlib.Path, size: int) -> list[pathlib.Path]:
     return paths
 
 
-def _transfer(tmp_path: pathlib.Path, setup: TransferSetup, size: int) -> None:
+def _transfer(tmp_path: pathlib.Path, setup: TransferSetup, size: int) -> KermitStatistics:
     for peer in (setup.sender, setup.receiver):
         if not available(peer):
             pytest.skip(_REASON[peer])
     files = _files(tmp_path / "src", size)
     out = tmp_path / "out"
     out.mkdir()
-    run_transfer(setup, files, out)  # raises on failure or on any differing byte
+    result = run_transfer(setup, files, out)  # raises on failure or on any differing byte
     for f in files:
         assert (out / f.name).read_bytes() == f.read_bytes()
+    assert result.ours is not None
+    assert result.ours.files == len(files)
+    assert result.ours.file_bytes == sum(f.stat().st_size for f in files)
+    # Both peers offer repeat counts; the files have long runs.
+    assert result.ours.repeat_prefix == "~"
+    return result.ours
 
 
 PAIRS = [
@@ -81,7 +88,9 @@ def test_clean_line_window_1_normal_packets(
     tmp_path: pathlib.Path, sender: str, receiver: str
 ) -> None:
     setup = TransferSetup(sender=sender, receiver=receiver, window=1, packet_length=94, limit=60)
-    _transfer(tmp_path, setup, 20_000)
+    stats = _transfer(tmp_path, setup, 20_000)
+    assert stats.eighth_bit_prefix is None  # an 8-bit line: no 8th-bit prefixing
+    assert (stats.window, stats.packet_length) == (1, 94)
 
 
 @pytest.mark.parametrize(("sender", "receiver"), PAIRS)
@@ -91,7 +100,7 @@ def test_seven_bit_line_uses_8th_bit_prefixing(
     setup = TransferSetup(
         sender=sender, receiver=receiver, window=8, packet_length=1000, seven_bit=True, limit=60
     )
-    _transfer(tmp_path, setup, 20_000)
+    assert _transfer(tmp_path, setup, 20_000).eighth_bit_prefix == "&"
 
 
 @pytest.mark.slow
@@ -111,4 +120,6 @@ def test_delayed_noisy_line_window_8_long_packets(
     )
     # G-Kermit is stop-and-wait (no windows): every 1000-character packet costs
     # a 0.2 s round trip, so it gets smaller files.
-    _transfer(tmp_path, setup, 8_000 if "gkermit" in (sender, receiver) else 20_000)
+    gkermit = "gkermit" in (sender, receiver)
+    stats = _transfer(tmp_path, setup, 8_000 if gkermit else 20_000)
+    assert stats.window == (1 if gkermit else 8)
