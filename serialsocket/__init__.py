@@ -57,8 +57,6 @@ from ._kermit import FileCompleted as FileCompleted
 from ._kermit import FileData as FileData
 from ._kermit import FileStarted as FileStarted
 from ._kermit import KermitEvent as KermitEvent
-from ._kermit import KermitReceiver as KermitReceiver
-from ._kermit import KermitSender as KermitSender
 from ._kermit import KermitState as KermitState
 from ._kermit import KermitStatistics as KermitStatistics
 from ._kermit import OutgoingFile as OutgoingFile
@@ -68,6 +66,8 @@ from ._kermit_io import KermitTransferError as KermitTransferError
 from ._kermit_io import kermit_receive as kermit_receive
 from ._kermit_io import kermit_send as kermit_send
 from ._kermit_params import KermitConfig as KermitConfig
+from ._kermit_receiver import KermitReceiver as KermitReceiver
+from ._kermit_sender import KermitSender as KermitSender
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity

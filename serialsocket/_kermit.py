@@ -1,4 +1,9 @@
-"""Kermit file transfer, sans-I/O: a sender and a receiver state machine.
+"""Kermit file transfer, sans-I/O: states, transition table, events, shared core.
+
+The two roles are :class:`~serialsocket.KermitSender` (``_kermit_sender.py``)
+and :class:`~serialsocket.KermitReceiver` (``_kermit_receiver.py``); both
+subclass :class:`KermitSide` below, and every state change of either goes
+through :data:`TRANSITIONS`.
 
 This is Kermit's own file-transfer protocol (reference/kermit.md section 5),
 spoken with C-Kermit, G-Kermit and anything else that speaks it, on the same
@@ -39,7 +44,6 @@ from __future__ import annotations
 import enum
 import logging
 from collections import deque
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -47,18 +51,16 @@ from ._checks import BlockCheck
 from ._encoding import Encoding
 from ._errors import LocalProtocolError, MalformedDataError, RemoteProtocolError
 from ._kermit_params import KermitConfig, KermitInit, KermitNegotiated, negotiate_kermit
-from ._kermit_window import ReceiveWindow, SendSlot, SendWindow
-from ._packet import Packet, build_packet, data_capacity
+from ._packet import Packet, build_packet
 from ._parser import PacketParser, PacketReceived
-from ._wire import CR, MAX_PACKET_LENGTH, SEQ_MODULUS, PacketType
+from ._wire import CR, MAX_PACKET_LENGTH, PacketType
 
 __all__ = [
     "FileCompleted",
     "FileData",
     "FileStarted",
     "KermitEvent",
-    "KermitReceiver",
-    "KermitSender",
+    "KermitSide",
     "KermitState",
     "KermitStatistics",
     "OutgoingFile",
@@ -235,8 +237,12 @@ class KermitStatistics:
     repeat_prefix: str | None
 
 
-class _Side:
-    """What both roles share: parser, output buffer, events, E packets, counters."""
+class KermitSide:
+    """What both roles share: parser, output buffer, events, E packets, counters.
+
+    Not used directly: :class:`~serialsocket.KermitSender` (``_kermit_sender``)
+    and :class:`~serialsocket.KermitReceiver` (``_kermit_receiver``) subclass it.
+    """
 
     def __init__(self, config: KermitConfig, state: KermitState) -> None:
         self.config = config
@@ -433,340 +439,5 @@ class _Side:
         raise NotImplementedError
 
 
-class KermitSender(_Side):
-    """Sends a batch of files to a Kermit receiver.
-
-    Args:
-        files: what to send, in order (may be empty: then only S and B).
-        config: local settings.
-        now: the current time, to start the S packet's timer.
-
-    The S packet is queued at once: call :meth:`data_to_send`.
-    """
-
-    def __init__(self, files: Sequence[OutgoingFile], config: KermitConfig, now: float) -> None:
-        super().__init__(config, KermitState.SEND_INIT)
-        self._files_left: deque[OutgoingFile] = deque(files)
-        self._file: OutgoingFile | None = None
-        self._pending = bytearray()
-        self._eof = False
-        self._discard = False
-        self._window = SendWindow(1)
-        self._seq = 0
-        self._transmissions = 0  # orders every copy sent, for the lost-copy rule
-        self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
-
-    def _error_seq(self) -> int:
-        return self._seq
-
-    def _send(self, ptype: str, data: bytes, now: float, *, init: bool = False) -> None:
-        seq = self._seq
-        self._seq = (seq + 1) % SEQ_MODULUS
-        self._transmissions += 1
-        wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
-        self._window.push(seq, wire, self._transmissions)
-        self._deadline = now + self._timeout()
-
-    def _on_packet(self, packet: Packet, now: float) -> None:
-        window = self._window
-        if packet.type == PacketType.ACK:
-            slot = window.get(packet.seq)
-            if slot is None or slot.acked:
-                oldest = window.oldest()
-                if (
-                    window.size == 1
-                    and oldest is not None
-                    and packet.seq == (oldest.seq - 1) % SEQ_MODULUS
-                ):
-                    # Stop-and-wait: G-Kermit answers a damaged packet by
-                    # re-ACKing the one before it.  Resend now (gkermit.c does
-                    # the same for a "wrong sequence number") instead of
-                    # waiting out the timer.
-                    self._retransmit(oldest, now)
-                return  # otherwise an old duplicate ACK
-            oldest = window.oldest()
-            window.ack(packet.seq)
-            self._deadline = now + self._timeout()
-            if oldest is not None and slot.first_sent > oldest.last_sent:
-                # Every copy of the packet just ACKed left after window-low's
-                # last copy, and the line keeps order: that copy or its ACK
-                # was lost (see the module doc).  A receiver NAKs a gap only
-                # once, so without this a second loss waits out the timer.
-                self._retransmit(oldest, now)
-                if self.finished:
-                    return
-            self._after_ack(packet, now)
-        elif packet.type == PacketType.NAK:
-            self._naks_received += 1
-            slot = window.get(packet.seq)
-            if self._state is KermitState.SEND_INIT:
-                self._retransmit_oldest(now)  # even NAK(1): the ACK of S carries parameters
-            elif slot is not None and not slot.acked:
-                self._retransmit(slot, now)
-            elif packet.seq == self._seq:
-                window.ack_all()  # NAK(n+1) = ACK(n)
-                self._deadline = now + self._timeout()
-                self._after_ack(None, now)
-        # Anything else from a receiver (echoes, stray types) is ignored, as ckcfn2.c does.
-
-    def _after_ack(self, ack: Packet | None, now: float) -> None:
-        """The window moved: take the next step of the batch."""
-        state = self._state
-        if len(self._window) and state is not KermitState.SEND_DATA:
-            return
-        if state is KermitState.SEND_INIT:
-            assert ack is not None
-            self._negotiate(ack.data)
-            assert self._neg is not None
-            self._window = SendWindow(self._neg.window)
-            self._next_file(now)
-        elif state is KermitState.SEND_FILE:
-            if self._neg is not None and self._neg.attributes:
-                self._goto(KermitState.SEND_ATTRIBUTES)
-                self._send(PacketType.ATTRIBUTES, self._attributes(), now)
-            else:
-                self._goto(KermitState.SEND_DATA)
-                self._fill(now)
-        elif state is KermitState.SEND_ATTRIBUTES:
-            if ack is not None and ack.data[:1] == b"N":
-                self._discard = True  # the receiver refused the file
-                self._goto(KermitState.SEND_EOF)
-                self._send(PacketType.EOF, b"D", now)
-            else:
-                self._goto(KermitState.SEND_DATA)
-                self._fill(now)
-        elif state is KermitState.SEND_DATA:
-            if ack is not None and ack.data[:1] in (b"X", b"Z"):
-                self._discard = True  # receiver cancelled the file (X) or batch (Z)
-                if ack.data[:1] == b"Z":
-                    self._files_left.clear()
-            self._fill(now)
-        elif state is KermitState.SEND_EOF:
-            assert self._file is not None
-            self._files += 1
-            self._events.append(FileCompleted(self._file.name, self._discard))
-            self._next_file(now)
-        elif state is KermitState.SEND_BREAK:
-            self._goto(KermitState.DONE)
-            self._deadline = None
-            self._events.append(TransferComplete())
-
-    def _next_file(self, now: float) -> None:
-        if not self._files_left:
-            self._goto(KermitState.SEND_BREAK)
-            self._send(PacketType.BREAK, b"", now)
-            return
-        self._file = self._files_left.popleft()
-        self._pending.clear()
-        self._eof = self._discard = False
-        self._goto(KermitState.SEND_FILE)
-        assert self._neg is not None
-        name = self._neg.send_encoding.encode(self._file.name.encode("utf-8", "replace"))
-        capacity = data_capacity(self._neg.send_max_length, self._neg.check)
-        self._send(PacketType.FILE, name[:capacity], now)
-        self._events.append(FileStarted(self._file.name))
-
-    def _attributes(self) -> bytes:
-        """A packet: ``"`` type = binary 8-bit, ``1`` = length in bytes when known."""
-        assert self._file is not None
-        assert self._neg is not None
-        fields = b'"' + bytes([32 + 2]) + b"B8"
-        if self._file.size is not None:
-            size = str(self._file.size).encode()
-            fields += b"1" + bytes([32 + len(size)]) + size
-        return self._neg.send_encoding.encode(fields)
-
-    def _fill(self, now: float) -> None:
-        """Send D packets while the window has room; Z once the file is all acknowledged."""
-        assert self._neg is not None
-        assert self._file is not None
-        neg = self._neg
-        capacity = data_capacity(neg.send_max_length, neg.check)
-        while not self._window.full and not self._discard:
-            if len(self._pending) < capacity and not self._eof:
-                chunk = self._file.source.read(capacity * _READ_AHEAD)
-                if chunk:
-                    self._pending += chunk
-                else:
-                    self._eof = True
-            if not self._pending:
-                break
-            field, used = neg.send_encoding.encode_prefix(self._pending, capacity)
-            del self._pending[:used]
-            self._file_bytes += used
-            self._send(PacketType.DATA, field, now)
-        done = self._discard or (self._eof and not self._pending)
-        if done and not len(self._window):
-            self._goto(KermitState.SEND_EOF)
-            self._send(PacketType.EOF, b"D" if self._discard else b"", now)
-
-    def _on_damage(self, now: float) -> None:
-        if self._state is KermitState.SEND_BREAK:
-            # The receiver answered B; the answer was damaged.  See _BREAK_RETRIES.
-            self._break_unacknowledged()
-        elif len(self._window) and self._window.size == 1:
-            # Stop-and-wait: a damaged reply means "resend" (gkermit.c); with a
-            # window the receiver's NAKs and the timer repair instead.
-            self._retransmit_oldest(now)
-
-    def _on_timeout(self, now: float) -> None:
-        slot = self._window.oldest()
-        if self._state is KermitState.SEND_BREAK and slot and slot.retries >= _BREAK_RETRIES:
-            self._break_unacknowledged()
-        else:
-            self._retransmit_oldest(now)
-
-    def _break_unacknowledged(self) -> None:
-        self._goto(KermitState.DONE)
-        self._deadline = None
-        self._events.append(TransferComplete(break_acknowledged=False))
-
-    def _retransmit_oldest(self, now: float) -> None:
-        slot = self._window.oldest()
-        if slot is None:
-            self._deadline = now + self._timeout()
-        else:
-            self._retransmit(slot, now)
-
-    def _retransmit(self, slot: SendSlot, now: float) -> None:
-        """Resend one packet, or give up once it has used up its retries."""
-        limit = self._retry_limit()
-        if limit and slot.retries >= limit:
-            self.abort("Too many retries", message=f"too many retries ({limit}): the link is down")
-            return
-        slot.retries += 1
-        self._transmissions += 1
-        slot.last_sent = self._transmissions
-        self._resend(slot.wire)
-        self._deadline = now + self._timeout()
-
-
-class KermitReceiver(_Side):
-    """Receives a batch of files from a Kermit sender.
-
-    Emits :class:`FileStarted`, :class:`FileData` (in order),
-    :class:`FileCompleted` per file, then :class:`TransferComplete`; the
-    caller stores the bytes.  File names arrive as the peer sent them: the
-    caller must sanitise them before using them as paths.
-
-    Args:
-        config: local settings.
-        now: the current time (starts the wait for S).
-    """
-
-    def __init__(self, config: KermitConfig, now: float) -> None:
-        super().__init__(config, KermitState.RECEIVE_INIT)
-        self._window = ReceiveWindow(1, 0)
-        self._acks: dict[int, bytes] = {}  # last ACK sent per sequence number (bounded: 64)
-        self._name = ""
-        self._size: int | None = None
-        self._deadline = now + self._timeout()
-
-    def _error_seq(self) -> int:
-        return self._window.low
-
-    def _ack(self, seq: int, data: bytes = b"", *, init: bool = False) -> None:
-        self._acks[seq] = self._emit(Packet(seq=seq, type=PacketType.ACK, data=data), init=init)
-
-    def _nak(self, seq: int) -> None:
-        self._naks_sent += 1
-        self._emit(Packet(seq=seq, type=PacketType.NAK))
-
-    def _on_packet(self, packet: Packet, now: float) -> None:
-        window = self._window
-        if self._state is KermitState.RECEIVE_INIT:
-            if packet.type != PacketType.SEND_INIT:
-                return  # noise before the transfer, or a peer in another mode
-            self._negotiate(packet.data)
-            assert self._neg is not None
-            self._ack(packet.seq, self._mine.encode(), init=True)
-            self._window = ReceiveWindow(self._neg.window, (packet.seq + 1) % SEQ_MODULUS)
-            self._goto(KermitState.RECEIVE_FILE)
-            self._progress(now)
-            return
-        if window.in_window(packet.seq):
-            self._progress(now)
-            window.hold(packet)
-            ack_data = b""
-            self._ack(packet.seq, ack_data)
-            while not self.finished and (ready := window.pop_ready()) is not None:
-                self._deliver(ready)
-            if not self.finished and (gap := window.gap_to_nak()) is not None:
-                window.naked(gap)
-                self._nak(gap)
-        elif window.in_previous(packet.seq):
-            wire = self._acks.get(packet.seq)
-            if wire is not None:
-                self._resend(wire)  # our ACK was lost: say it again
-            else:
-                self._ack(packet.seq)
-        # Outside both windows: a stray; ignored (C-Kermit chkwin()).
-
-    def _progress(self, now: float) -> None:
-        self._retries = 0
-        self._deadline = now + self._timeout()
-
-    def _deliver(self, packet: Packet) -> None:
-        """Act on the next in-order packet."""
-        ptype, state = packet.type, self._state
-        if state is KermitState.RECEIVE_FILE and ptype == PacketType.FILE:
-            self._name = self._decode(packet.data).decode("utf-8", "replace")
-            self._size = None
-            self._goto(KermitState.RECEIVE_DATA)
-            self._events.append(FileStarted(self._name))
-        elif state is KermitState.RECEIVE_FILE and ptype == PacketType.BREAK:
-            self._goto(KermitState.DONE)
-            self._deadline = None
-            self._events.append(TransferComplete())
-        elif state is KermitState.RECEIVE_DATA and ptype == PacketType.DATA:
-            data = self._decode(packet.data)
-            self._file_bytes += len(data)
-            if data:
-                self._events.append(FileData(data))
-        elif state is KermitState.RECEIVE_DATA and ptype == PacketType.ATTRIBUTES:
-            self._size = _attribute_size(self._decode(packet.data))
-        elif state is KermitState.RECEIVE_DATA and ptype == PacketType.EOF:
-            discarded = self._decode(packet.data)[:1] == b"D"
-            self._files += 1
-            self._goto(KermitState.RECEIVE_FILE)
-            self._events.append(FileCompleted(self._name, discarded, self._size))
-        elif ptype == PacketType.SEND_INIT:
-            return  # a late S copy inside the window: its ACK was already sent
-        else:
-            raise RemoteProtocolError(
-                f"unexpected {ptype!r} packet in state {state.value}",
-                error_hint=f"Unexpected packet type {ptype}",
-            )
-
-    def _on_damage(self, now: float) -> None:
-        if self._state is KermitState.RECEIVE_INIT:
-            return  # nothing to NAK yet; the timer NAKs 0
-        gap = self._window.gap_to_nak()
-        if gap is None:
-            gap = self._window.low
-        else:
-            self._window.naked(gap)
-        self._nak(gap)
-
-    def _on_timeout(self, now: float) -> None:
-        self._deadline = now + self._timeout()
-        if not self._count_retry():
-            return
-        self._window.forget_naks()
-        self._nak(self._window.low)
-
-
 def _prefix(c: int | None) -> str | None:
     return None if c is None else chr(c)
-
-
-def _attribute_size(field: bytes) -> int | None:
-    """The ``1`` (length in bytes) attribute of an A packet, if present and numeric."""
-    i = 0
-    while i + 1 < len(field):
-        tag, n = field[i], field[i + 1] - 32
-        value = field[i + 2 : i + 2 + max(n, 0)]
-        if tag == ord("1") and value.isdigit():
-            return int(value)
-        i += 2 + max(n, 0)
-    return None

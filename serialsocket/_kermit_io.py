@@ -24,14 +24,14 @@ from ._kermit import (
     FileData,
     FileStarted,
     KermitEvent,
-    KermitReceiver,
-    KermitSender,
     KermitStatistics,
     OutgoingFile,
     TransferComplete,
     TransferFailed,
 )
 from ._kermit_params import KermitConfig
+from ._kermit_receiver import KermitReceiver
+from ._kermit_sender import KermitSender
 
 __all__ = ["KermitTransferError", "kermit_receive", "kermit_send", "safe_file_name"]
 

@@ -23,6 +23,8 @@ SANS_IO = [
     "_events",
     "_kermit",
     "_kermit_params",
+    "_kermit_receiver",
+    "_kermit_sender",
     "_kermit_window",
     "_packet",
     "_params",

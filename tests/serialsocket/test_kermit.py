@@ -22,8 +22,6 @@ from serialsocket._kermit import (
     FileData,
     FileStarted,
     KermitEvent,
-    KermitReceiver,
-    KermitSender,
     KermitState,
     KermitStatistics,
     OutgoingFile,
@@ -32,6 +30,8 @@ from serialsocket._kermit import (
 )
 from serialsocket._kermit_io import kermit_receive, kermit_send, safe_file_name
 from serialsocket._kermit_params import KermitConfig, KermitInit, negotiate_kermit
+from serialsocket._kermit_receiver import KermitReceiver
+from serialsocket._kermit_sender import KermitSender
 
 Side = KermitSender | KermitReceiver
 

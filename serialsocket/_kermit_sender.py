@@ -1,0 +1,235 @@
+"""Kermit file transfer, sans-I/O: the sender (see :mod:`serialsocket._kermit`).
+
+The states, their transition table, the events and the shared machinery
+are in :mod:`serialsocket._kermit`; this module is the sending role.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+
+from ._kermit import (
+    _BREAK_RETRIES,
+    _READ_AHEAD,
+    FileCompleted,
+    FileStarted,
+    KermitSide,
+    KermitState,
+    OutgoingFile,
+    TransferComplete,
+)
+from ._kermit_params import KermitConfig
+from ._kermit_window import SendSlot, SendWindow
+from ._packet import Packet, data_capacity
+from ._wire import SEQ_MODULUS, PacketType
+
+__all__ = ["KermitSender"]
+
+
+class KermitSender(KermitSide):
+    """Sends a batch of files to a Kermit receiver.
+
+    Args:
+        files: what to send, in order (may be empty: then only S and B).
+        config: local settings.
+        now: the current time, to start the S packet's timer.
+
+    The S packet is queued at once: call :meth:`data_to_send`.
+    """
+
+    def __init__(self, files: Sequence[OutgoingFile], config: KermitConfig, now: float) -> None:
+        super().__init__(config, KermitState.SEND_INIT)
+        self._files_left: deque[OutgoingFile] = deque(files)
+        self._file: OutgoingFile | None = None
+        self._pending = bytearray()
+        self._eof = False
+        self._discard = False
+        self._window = SendWindow(1)
+        self._seq = 0
+        self._transmissions = 0  # orders every copy sent, for the lost-copy rule
+        self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
+
+    def _error_seq(self) -> int:
+        return self._seq
+
+    def _send(self, ptype: str, data: bytes, now: float, *, init: bool = False) -> None:
+        seq = self._seq
+        self._seq = (seq + 1) % SEQ_MODULUS
+        self._transmissions += 1
+        wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
+        self._window.push(seq, wire, self._transmissions)
+        self._deadline = now + self._timeout()
+
+    def _on_packet(self, packet: Packet, now: float) -> None:
+        window = self._window
+        if packet.type == PacketType.ACK:
+            slot = window.get(packet.seq)
+            if slot is None or slot.acked:
+                oldest = window.oldest()
+                if (
+                    window.size == 1
+                    and oldest is not None
+                    and packet.seq == (oldest.seq - 1) % SEQ_MODULUS
+                ):
+                    # Stop-and-wait: G-Kermit answers a damaged packet by
+                    # re-ACKing the one before it.  Resend now (gkermit.c does
+                    # the same for a "wrong sequence number") instead of
+                    # waiting out the timer.
+                    self._retransmit(oldest, now)
+                return  # otherwise an old duplicate ACK
+            oldest = window.oldest()
+            window.ack(packet.seq)
+            self._deadline = now + self._timeout()
+            if oldest is not None and slot.first_sent > oldest.last_sent:
+                # Every copy of the packet just ACKed left after window-low's
+                # last copy, and the line keeps order: that copy or its ACK
+                # was lost (see the module doc).  A receiver NAKs a gap only
+                # once, so without this a second loss waits out the timer.
+                self._retransmit(oldest, now)
+                if self.finished:
+                    return
+            self._after_ack(packet, now)
+        elif packet.type == PacketType.NAK:
+            self._naks_received += 1
+            slot = window.get(packet.seq)
+            if self._state is KermitState.SEND_INIT:
+                self._retransmit_oldest(now)  # even NAK(1): the ACK of S carries parameters
+            elif slot is not None and not slot.acked:
+                self._retransmit(slot, now)
+            elif packet.seq == self._seq:
+                window.ack_all()  # NAK(n+1) = ACK(n)
+                self._deadline = now + self._timeout()
+                self._after_ack(None, now)
+        # Anything else from a receiver (echoes, stray types) is ignored, as ckcfn2.c does.
+
+    def _after_ack(self, ack: Packet | None, now: float) -> None:
+        """The window moved: take the next step of the batch."""
+        state = self._state
+        if len(self._window) and state is not KermitState.SEND_DATA:
+            return
+        if state is KermitState.SEND_INIT:
+            assert ack is not None
+            self._negotiate(ack.data)
+            assert self._neg is not None
+            self._window = SendWindow(self._neg.window)
+            self._next_file(now)
+        elif state is KermitState.SEND_FILE:
+            if self._neg is not None and self._neg.attributes:
+                self._goto(KermitState.SEND_ATTRIBUTES)
+                self._send(PacketType.ATTRIBUTES, self._attributes(), now)
+            else:
+                self._goto(KermitState.SEND_DATA)
+                self._fill(now)
+        elif state is KermitState.SEND_ATTRIBUTES:
+            if ack is not None and ack.data[:1] == b"N":
+                self._discard = True  # the receiver refused the file
+                self._goto(KermitState.SEND_EOF)
+                self._send(PacketType.EOF, b"D", now)
+            else:
+                self._goto(KermitState.SEND_DATA)
+                self._fill(now)
+        elif state is KermitState.SEND_DATA:
+            if ack is not None and ack.data[:1] in (b"X", b"Z"):
+                self._discard = True  # receiver cancelled the file (X) or batch (Z)
+                if ack.data[:1] == b"Z":
+                    self._files_left.clear()
+            self._fill(now)
+        elif state is KermitState.SEND_EOF:
+            assert self._file is not None
+            self._files += 1
+            self._events.append(FileCompleted(self._file.name, self._discard))
+            self._next_file(now)
+        elif state is KermitState.SEND_BREAK:
+            self._goto(KermitState.DONE)
+            self._deadline = None
+            self._events.append(TransferComplete())
+
+    def _next_file(self, now: float) -> None:
+        if not self._files_left:
+            self._goto(KermitState.SEND_BREAK)
+            self._send(PacketType.BREAK, b"", now)
+            return
+        self._file = self._files_left.popleft()
+        self._pending.clear()
+        self._eof = self._discard = False
+        self._goto(KermitState.SEND_FILE)
+        assert self._neg is not None
+        name = self._neg.send_encoding.encode(self._file.name.encode("utf-8", "replace"))
+        capacity = data_capacity(self._neg.send_max_length, self._neg.check)
+        self._send(PacketType.FILE, name[:capacity], now)
+        self._events.append(FileStarted(self._file.name))
+
+    def _attributes(self) -> bytes:
+        """A packet: ``"`` type = binary 8-bit, ``1`` = length in bytes when known."""
+        assert self._file is not None
+        assert self._neg is not None
+        fields = b'"' + bytes([32 + 2]) + b"B8"
+        if self._file.size is not None:
+            size = str(self._file.size).encode()
+            fields += b"1" + bytes([32 + len(size)]) + size
+        return self._neg.send_encoding.encode(fields)
+
+    def _fill(self, now: float) -> None:
+        """Send D packets while the window has room; Z once the file is all acknowledged."""
+        assert self._neg is not None
+        assert self._file is not None
+        neg = self._neg
+        capacity = data_capacity(neg.send_max_length, neg.check)
+        while not self._window.full and not self._discard:
+            if len(self._pending) < capacity and not self._eof:
+                chunk = self._file.source.read(capacity * _READ_AHEAD)
+                if chunk:
+                    self._pending += chunk
+                else:
+                    self._eof = True
+            if not self._pending:
+                break
+            field, used = neg.send_encoding.encode_prefix(self._pending, capacity)
+            del self._pending[:used]
+            self._file_bytes += used
+            self._send(PacketType.DATA, field, now)
+        done = self._discard or (self._eof and not self._pending)
+        if done and not len(self._window):
+            self._goto(KermitState.SEND_EOF)
+            self._send(PacketType.EOF, b"D" if self._discard else b"", now)
+
+    def _on_damage(self, now: float) -> None:
+        if self._state is KermitState.SEND_BREAK:
+            # The receiver answered B; the answer was damaged.  See _BREAK_RETRIES.
+            self._break_unacknowledged()
+        elif len(self._window) and self._window.size == 1:
+            # Stop-and-wait: a damaged reply means "resend" (gkermit.c); with a
+            # window the receiver's NAKs and the timer repair instead.
+            self._retransmit_oldest(now)
+
+    def _on_timeout(self, now: float) -> None:
+        slot = self._window.oldest()
+        if self._state is KermitState.SEND_BREAK and slot and slot.retries >= _BREAK_RETRIES:
+            self._break_unacknowledged()
+        else:
+            self._retransmit_oldest(now)
+
+    def _break_unacknowledged(self) -> None:
+        self._goto(KermitState.DONE)
+        self._deadline = None
+        self._events.append(TransferComplete(break_acknowledged=False))
+
+    def _retransmit_oldest(self, now: float) -> None:
+        slot = self._window.oldest()
+        if slot is None:
+            self._deadline = now + self._timeout()
+        else:
+            self._retransmit(slot, now)
+
+    def _retransmit(self, slot: SendSlot, now: float) -> None:
+        """Resend one packet, or give up once it has used up its retries."""
+        limit = self._retry_limit()
+        if limit and slot.retries >= limit:
+            self.abort("Too many retries", message=f"too many retries ({limit}): the link is down")
+            return
+        slot.retries += 1
+        self._transmissions += 1
+        slot.last_sent = self._transmissions
+        self._resend(slot.wire)
+        self._deadline = now + self._timeout()
