@@ -207,7 +207,7 @@ async def _command_traffic(client: ArmClient, report: SoakReport, end: float) ->
             report.commands_completed += 1
 
 
-async def _soak(report: SoakReport, outage_every: float, bulk: bool) -> None:
+async def _soak(report: SoakReport, outage_every: float, bulk: bool, progress: bool) -> None:
     seed = report.seed
     end = report.hours * 3600.0
     outages = _schedule(report.hours, outage_every)
@@ -243,6 +243,16 @@ async def _soak(report: SoakReport, outage_every: float, bulk: bool) -> None:
             while True:
                 await trio.sleep(3600.0)
                 report.memory_samples.append(tracemalloc.get_traced_memory()[0])
+                if progress:
+                    print(
+                        f"[soak] hour {len(report.memory_samples)}: "
+                        f"{report.commands_completed} commands, "
+                        f"bulk {verified['a_to_b'][0]}/{verified['b_to_a'][0]} B verified, "
+                        f"{len(report.halts)} halts, memory {report.memory_samples[-1]} B, "
+                        f"cpu {time.process_time():.0f} s",
+                        file=sys.stderr,
+                        flush=True,
+                    )
 
         async def bulk_both_ways() -> None:
             link = _with_outages(dataclasses.replace(base, seed=seed + 100_000), outages, 0.0)
@@ -280,9 +290,17 @@ async def _soak(report: SoakReport, outage_every: float, bulk: bool) -> None:
 
 
 def run_soak(
-    hours: float = 24.0, seed: int = 0, *, outage_every: float = 3.0, bulk: bool = True
+    hours: float = 24.0,
+    seed: int = 0,
+    *,
+    outage_every: float = 3.0,
+    bulk: bool = True,
+    progress: bool = False,
 ) -> SoakReport:
-    """Run the soak for ``hours`` of simulated time; the report (see :func:`check`)."""
+    """Run the soak for ``hours`` of simulated time; the report (see :func:`check`).
+
+    ``progress`` prints one line per simulated hour to stderr.
+    """
     report = SoakReport(hours=hours, seed=seed)
     started = time.process_time()
     tracing = tracemalloc.is_tracing()
@@ -290,7 +308,12 @@ def run_soak(
         tracemalloc.start()
     try:
         trio.run(
-            _soak, report, outage_every, bulk, clock=trio.testing.MockClock(autojump_threshold=0)
+            _soak,
+            report,
+            outage_every,
+            bulk,
+            progress,
+            clock=trio.testing.MockClock(autojump_threshold=0),
         )
     finally:
         if not tracing:
@@ -333,10 +356,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--outage-every", type=float, default=3.0, help="hours between outages (default 3)"
     )
     ap.add_argument("--no-bulk", action="store_true", help="commands only")
+    ap.add_argument("--quiet", action="store_true", help="no progress line per simulated hour")
     args = ap.parse_args(argv)
     if not args.hours > 0 or not args.outage_every > 0:
         ap.error("--hours and --outage-every must be > 0")
-    report = run_soak(args.hours, args.seed, outage_every=args.outage_every, bulk=not args.no_bulk)
+    report = run_soak(
+        args.hours,
+        args.seed,
+        outage_every=args.outage_every,
+        bulk=not args.no_bulk,
+        progress=not args.quiet,
+    )
     problems = check(report)
     summary = report.as_dict()
     summary["halts"] = len(report.halts)
