@@ -118,7 +118,11 @@ def _encode(args: argparse.Namespace) -> int:
 def _decode(args: argparse.Namespace) -> int:
     data = _read_stdin()
     if args.hex:
-        data = bytes.fromhex(data.decode("ascii", "replace").replace("\n", " "))
+        try:
+            data = bytes.fromhex(data.decode("ascii", "replace").replace("\n", " "))
+        except ValueError as exc:
+            print(f"serialsocket decode: --hex input is not hex digits: {exc}", file=sys.stderr)
+            return 2
     parser = PacketParser(max_length=args.max_len, check=args.check, init_check=args.init_check)
     parser.receive_data(data)
     encoding = _PROFILES[args.profile]

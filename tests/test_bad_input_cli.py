@@ -65,13 +65,6 @@ def test_serialsocket_cli_rejects_bad_options(
     assert "Traceback" not in err
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ValueError,
-    reason="serialsocket/_cli.py _decode calls bytes.fromhex on --hex input without "
-    "catching ValueError: non-hex input crashes with a traceback instead of exit 2 "
-    "(file owned by another engineer; reported, not fixed here)",
-)
 def test_serialsocket_decode_hex_rejects_non_hex_input(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
