@@ -41,6 +41,7 @@ ARQ, as C-Kermit does it (ckcfn2.c input()):
 
 from __future__ import annotations
 
+import abc
 import enum
 import logging
 from collections import deque
@@ -237,7 +238,7 @@ class KermitStatistics:
     repeat_prefix: str | None
 
 
-class KermitSide:
+class KermitSide(abc.ABC):
     """What both roles share: parser, output buffer, events, E packets, counters.
 
     Not used directly: :class:`~serialsocket.KermitSender` (``_kermit_sender``)
@@ -426,17 +427,21 @@ class KermitSide:
 
     # -- role hooks -------------------------------------------------------------
 
+    @abc.abstractmethod
     def _on_packet(self, packet: Packet, now: float) -> None:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
+    @abc.abstractmethod
     def _on_damage(self, now: float) -> None:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
+    @abc.abstractmethod
     def _on_timeout(self, now: float) -> None:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
+    @abc.abstractmethod
     def _error_seq(self) -> int:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
 
 def _prefix(c: int | None) -> str | None:

@@ -18,6 +18,7 @@ about commands once they are received (queue, executor, exactly-once memory).
 
 from __future__ import annotations
 
+import abc
 import logging
 import math
 import struct
@@ -94,7 +95,7 @@ def _identity_bytes(name: str) -> bytes:
     return raw.ljust(IDENTITY_SIZE, b"\0")
 
 
-class _Connection:
+class _Connection(abc.ABC):
     """What both ends share: framing, checks, counters, timers, events."""
 
     side: Side
@@ -327,7 +328,7 @@ class _Connection:
             self.close(CloseReason.GARBAGE, now, text)
             self._events.append(SessionEnded(CloseReason.GARBAGE, text, by_peer=False))
 
-    def _answer_rejected(
+    def _answer_rejected(  # noqa: B027 (a no-op by default, not abstract)
         self, reason: FailureReason, message: str, request_id: int, now: float
     ) -> None:
         """The arm answers a rejected packet with FAILED; the controller only counts it."""
@@ -386,15 +387,17 @@ class _Connection:
             now,
         )
 
+    @abc.abstractmethod
     def _dispatch(self, packet: Packet, now: float) -> None:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
     def _idle_deadline(self) -> float:
         """When an idle session ends (the arm's controller only; never by default)."""
         return math.inf
 
+    @abc.abstractmethod
     def _handshake_timed_out(self, now: float) -> None:
-        raise NotImplementedError
+        """Role hook: each side implements it."""
 
 
 def _with(packet: Packet, *, counter: int) -> Packet:
