@@ -28,6 +28,8 @@ from serialsocket import (
     listen,
 )
 
+from .borrowed import Borrowed
+
 
 def run(fn: Callable[[], Awaitable[None]]) -> None:
     trio.run(fn, clock=trio.testing.MockClock(autojump_threshold=0))
@@ -173,7 +175,7 @@ def test_listener_resets_and_accepts_the_next_connection() -> None:
                     handshake.start_soon(do_accept)
                     # A fresh client endpoint each time on the same line: the
                     # manipulator side resets and listens between sessions.
-                    client = await connect(_Borrowed(line.a), cfg, nursery=nursery)
+                    client = await connect(Borrowed(line.a), cfg, nursery=nursery)
                 server = accepted[0]
                 await client.send_all(f"session {n}".encode())
                 assert await server.receive_some() == f"session {n}".encode()
@@ -186,25 +188,6 @@ def test_listener_resets_and_accepts_the_next_connection() -> None:
     run(main)
 
 
-class _Borrowed(trio.abc.Stream):
-    """A view of a port that does not close it (several clients in turn)."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes | bytearray:
-        return await self.inner.receive_some(max_bytes)
-
-    async def aclose(self) -> None:
-        await trio.lowlevel.checkpoint()
-
-
 def test_refused_and_timed_out_connects_are_typed_errors() -> None:
     link_cfg = LinkConfig.preset("clean")
 
@@ -213,7 +196,7 @@ def test_refused_and_timed_out_connects_are_typed_errors() -> None:
         async with trio.open_nursery() as nursery:
             with pytest.raises(TimeoutError, match="no answer to connect"):
                 await connect(
-                    _Borrowed(line.a), EndpointConfig(connect_timeout=3.0), nursery=nursery
+                    Borrowed(line.a), EndpointConfig(connect_timeout=3.0), nursery=nursery
                 )
             nursery.cancel_scope.cancel()
 
