@@ -18,7 +18,7 @@ from serialsocket import EndpointConfig, SerialSocket, connect, listen
 from ._channel import open_impaired_link
 from ._config import LinkConfig
 
-__all__ = ["endpoint_config_for", "serial_socket_pair"]
+__all__ = ["connected_pair", "endpoint_config_for", "serial_socket_pair"]
 
 
 def endpoint_config_for(link: LinkConfig, **overrides: Any) -> EndpointConfig:
@@ -69,9 +69,22 @@ async def serial_socket_pair(
         read_latency = 16 * link.a_to_b.char_time
     async with (
         open_impaired_link(link, read_latency=read_latency) as (port_a, port_b),
-        trio.open_nursery() as nursery,
-        listen(port_b, ep_cfg) as listener,
+        connected_pair(port_a, port_b, ep_cfg) as pair,
     ):
+        yield pair
+
+
+@asynccontextmanager
+async def connected_pair(
+    port_a: trio.abc.Stream, port_b: trio.abc.Stream, config: EndpointConfig
+) -> AsyncIterator[tuple[SerialSocket, SerialSocket]]:
+    """Two serial sockets over any two connected ports (ptys, the in-memory link...).
+
+    ``port_b`` listens, ``port_a`` connects, both with ``config``.  Yields
+    ``(client, server)``; both are closed on exit (gracefully if possible),
+    and with them the ports.
+    """
+    async with trio.open_nursery() as nursery, listen(port_b, config) as listener:
         accepted: list[SerialSocket] = []
 
         async def accept() -> None:
@@ -79,7 +92,7 @@ async def serial_socket_pair(
 
         async with trio.open_nursery() as handshake:
             handshake.start_soon(accept)
-            client = await connect(port_a, ep_cfg, nursery=nursery)
+            client = await connect(port_a, config, nursery=nursery)
         server = accepted[0]
         try:
             yield client, server

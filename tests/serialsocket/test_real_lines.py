@@ -13,17 +13,17 @@ import random
 import signal
 import subprocess
 import sys
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
-from contextlib import asynccontextmanager, contextmanager
+from collections.abc import Awaitable, Callable, Iterator
+from contextlib import contextmanager
 
 import pytest
 import trio
 
+from linksim._pair import connected_pair
 from serialsocket import (
     EndpointConfig,
     LinkDeadError,
     SerialSocket,
-    accept,
     answer,
     connect,
     dial,
@@ -31,6 +31,8 @@ from serialsocket import (
     open_port,
     open_pty_pair,
 )
+
+from .borrowed import Borrowed
 
 GUARD = 120.0
 # Real time on a shared 2-core machine: a test process may be starved for
@@ -64,30 +66,6 @@ def relay(*options: str) -> Iterator[tuple[str, str]]:
         assert proc.wait(timeout=30) == 0
 
 
-@asynccontextmanager
-async def socket_pair(
-    port_a: trio.abc.Stream, port_b: trio.abc.Stream, cfg: EndpointConfig
-) -> AsyncIterator[tuple[SerialSocket, SerialSocket]]:
-    async with trio.open_nursery() as nursery:
-        accepted: list[SerialSocket] = []
-
-        async def do_accept() -> None:
-            accepted.append(await accept(port_b, cfg, nursery=nursery))
-
-        async with trio.open_nursery() as handshake:
-            handshake.start_soon(do_accept)
-            client = await connect(port_a, cfg, nursery=nursery)
-        server = accepted[0]
-        try:
-            yield client, server
-        finally:
-            with trio.CancelScope(shield=True):
-                async with trio.open_nursery() as closing:
-                    closing.start_soon(client.aclose)
-                    closing.start_soon(server.aclose)
-        nursery.cancel_scope.cancel()
-
-
 async def exchange(a: SerialSocket, b: SerialSocket, ab: bytes, ba: bytes) -> tuple[bytes, bytes]:
     """Send both ways at once, half-close, read to EOF; returns (b got, a got)."""
     got_b, got_a = bytearray(), bytearray()
@@ -119,7 +97,7 @@ def test_one_mebibyte_each_way_at_once_through_an_impaired_relay() -> None:
     async def main() -> None:
         with relay("--delay", "0.002", "--ber", "2e-6", "--seed", "3") as (path_a, path_b):
             port_a, port_b = await open_port(path_a), await open_port(path_b)
-            async with socket_pair(port_a, port_b, cfg) as (client, server):
+            async with connected_pair(port_a, port_b, cfg) as (client, server):
                 got_b, got_a = await exchange(client, server, ab, ba)
                 assert got_b == ab
                 assert got_a == ba
@@ -151,8 +129,8 @@ def test_dial_through_emulated_modems_then_transfer_then_hang_up() -> None:
                 calls["dial"] = await dial(port_a, "5551234", init="ATS12=10")
             assert calls["dial"].result == calls["answer"].result == "CONNECT 2400"
 
-            borrowed_a, borrowed_b = _Borrowed(port_a), _Borrowed(port_b)
-            async with socket_pair(borrowed_a, borrowed_b, cfg) as (client, server):
+            borrowed_a, borrowed_b = Borrowed(port_a), Borrowed(port_b)
+            async with connected_pair(borrowed_a, borrowed_b, cfg) as (client, server):
                 got_b, got_a = await exchange(client, server, ab, ba)
                 assert (got_b, got_a) == (ab, ba)
             # The sockets are closed; the modems are still online: hang up.
@@ -166,25 +144,6 @@ def test_dial_through_emulated_modems_then_transfer_then_hang_up() -> None:
             await port_b.aclose()
 
     run(main)
-
-
-class _Borrowed(trio.abc.Stream):
-    """Lend a port to a serial socket without giving it away (the modem call outlives it)."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes | bytearray:
-        return await self.inner.receive_some(max_bytes)
-
-    async def aclose(self) -> None:
-        await trio.lowlevel.checkpoint()
 
 
 def test_peer_that_disappears_mid_transfer_gives_the_dead_link_report() -> None:
@@ -273,7 +232,7 @@ def test_garbage_between_packets_is_skipped() -> None:
     async def main() -> None:
         raw_a, raw_b = open_pty_pair()
         noisy_a, noisy_b = _Garbage(raw_a, 1), _Garbage(raw_b, 2)
-        async with socket_pair(noisy_a, noisy_b, cfg) as (client, server):
+        async with connected_pair(noisy_a, noisy_b, cfg) as (client, server):
             got_b, got_a = await exchange(client, server, ab, ba)
             assert (got_b, got_a) == (ab, ba)
             for sock, far in ((server, noisy_a), (client, noisy_b)):
@@ -290,7 +249,7 @@ def test_cancelled_receive_and_send_leave_the_stream_usable() -> None:
 
     async def main() -> None:
         raw_a, raw_b = open_pty_pair()
-        async with socket_pair(raw_a, raw_b, cfg) as (client, server):
+        async with connected_pair(raw_a, raw_b, cfg) as (client, server):
             # receive_some cancelled while waiting: nothing lost, still usable.
             with trio.move_on_after(0.05) as scope:
                 await server.receive_some()
