@@ -23,7 +23,8 @@ The report counts bytes, commands, executions, outages, deadman stops and
 traced memory (tracemalloc) sampled every simulated hour.  :func:`check`
 turns it into a verdict: zero bytes lost, duplicated or reordered; zero
 commands executed twice; one deadman stop inside every outage longer than the
-deadman; memory flat after the first hour.
+deadman and no halt anywhere else but the server's STOPPED at shutdown; memory
+flat after the first hour.
 """
 
 from __future__ import annotations
@@ -342,12 +343,24 @@ def check(report: SoakReport) -> list[str]:
         problems.append(f"{report.executed_twice} commands executed twice")
     if report.executions > report.commands_submitted:
         problems.append(f"{report.executions} executions of {report.commands_submitted} commands")
+    end = report.hours * 3600.0
+    deadman = [t for t, why in report.halts if why == FailureReason.DEADMAN.name]
     for start, stop in report.outages:
         if stop - start <= report.deadman:
             continue
-        stops = [t for t, _ in report.halts if start <= t <= start + report.deadman + 1.0]
+        stops = [t for t in deadman if start <= t <= start + report.deadman + 1.0]
         if len(stops) != 1:
             problems.append(f"outage {start:.0f}-{stop:.0f} s: {len(stops)} deadman stops")
+    # Every halt is accounted for: a deadman stop only inside a long outage (a
+    # trip on a healthy line would be a false alarm), and otherwise only the
+    # server's own STOPPED when the soak shuts it down after its last command.
+    long_outages = [(a, b) for a, b in report.outages if b - a > report.deadman]
+    for t, why in report.halts:
+        if why == FailureReason.DEADMAN.name:
+            if not any(a <= t <= a + report.deadman + 1.0 for a, _ in long_outages):
+                problems.append(f"deadman stop at {t:.0f} s outside any long outage")
+        elif not (why == FailureReason.STOPPED.name and t >= end):
+            problems.append(f"unexpected halt {why} at {t:.0f} s")
     samples = report.memory_samples
     if len(samples) >= 2 and max(samples[1:]) - samples[0] > MEMORY_SLACK:
         problems.append(f"traced memory grew from {samples[0]} to {max(samples[1:])} bytes")

@@ -4,7 +4,7 @@ Three simulated minutes of noisy-moon with a 30 s and a 300 s outage (one
 every 72 s), command traffic and bulk data both ways, on the virtual clock.
 The same :func:`linksim._soak.check` verdict as the full soak: every bulk
 byte verified in order, no command executed twice, one deadman stop in each
-outage longer than the deadman, no error.
+outage longer than the deadman and no other halt but the shutdown's, no error.
 """
 
 from __future__ import annotations
@@ -39,6 +39,8 @@ def test_short_soak_moved_data_and_commands_through_both_outages(
     assert report.reconnects >= 2  # the session came back after each long outage
     deadman_stops = [t for t, _ in report.halts if any(s <= t <= e for s, e in report.outages)]
     assert len(deadman_stops) == 2
+    # The only other halt is the server's own when the soak shuts it down.
+    assert [why for t, why in report.halts if t not in deadman_stops] == ["STOPPED"]
 
 
 def test_check_flags_what_it_must() -> None:
@@ -52,6 +54,13 @@ def test_check_flags_what_it_must() -> None:
     bad.memory_samples = [1_000_000, 1_000_000 + 2 * _soak.MEMORY_SLACK]
     problems = _soak.check(bad)
     assert len(problems) == 4, problems
+    # Halts are all accounted for: a deadman stop on a healthy line, or any
+    # halt but the shutdown's STOPPED, is a problem of its own.
+    bad.halts = [(15.0, "DEADMAN"), (500.0, "DEADMAN"), (600.0, "COLLISION"), (3600.0, "STOPPED")]
+    problems = _soak.check(bad)
+    assert len(problems) == 5, problems  # the outage now has its one stop
+    assert any("deadman stop at 500 s outside" in p for p in problems)
+    assert any("unexpected halt COLLISION at 600 s" in p for p in problems)
 
 
 def test_outage_schedule_cycles_lengths() -> None:
