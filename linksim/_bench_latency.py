@@ -48,6 +48,11 @@ from tcpstream import (
 
 __all__ = ["InstantArm", "add_arguments", "main", "run"]
 
+NO_RATE_LIMIT = None
+"""The bench ping-pongs as fast as the host allows (thousands of packets a
+second), far past the server's default ``max_packet_rate``: it measures the
+protocol path, so the arm's flood protection is off here."""
+
 _STATE = Feedback(
     joints=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     finger_opening=0.0,
@@ -144,7 +149,15 @@ async def _measure_tcp(
 ) -> tuple[list[float], list[float]]:
     async with trio.open_nursery() as nursery:
         arm_listeners = await nursery.start(
-            partial(serve_tcp, InstantArm(), 0, host="127.0.0.1", telemetry_every=0, key=key)
+            partial(
+                serve_tcp,
+                InstantArm(),
+                0,
+                host="127.0.0.1",
+                telemetry_every=0,
+                key=key,
+                max_packet_rate=NO_RATE_LIMIT,
+            )
         )
         echo_listeners = await nursery.start(
             partial(trio.serve_tcp, _echo_handler, 0, host="127.0.0.1")
@@ -168,7 +181,8 @@ async def _measure_serial(
 
     async def arm_side(listener: serialsocket.SerialListener) -> None:
         sock = await listener.accept()
-        async with Server(InstantArm(), ServerConfig(telemetry_every=0, key=key)) as server:
+        config = ServerConfig(telemetry_every=0, key=key, max_packet_rate=NO_RATE_LIMIT)
+        async with Server(InstantArm(), config) as server:
             await server.serve_stream(sock)
 
     async with (

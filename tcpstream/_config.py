@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import secrets
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,6 +60,17 @@ class ServerConfig:
     max_connections: int = 8
     """Simultaneous connections (one controller, the rest observers or waiting);
     each costs three tasks and a few kB."""
+    max_packet_rate: float | None = 500.0
+    """Packets per second each connection may send, sustained; None: no limit.
+    Past it the server reads that connection more slowly -- nothing is dropped;
+    the transport's flow control pushes back on the sender -- so a flooding peer
+    costs the arm at most this many packets' work a second (about 0.1 ms each)
+    and ``max_connections`` times that in all.  An honest controller needs far
+    less: 4 heartbeats a second, and commands the 125 Hz arm takes one by one.
+    Benchmarks that ping-pong as fast as the host allows set None."""
+    packet_burst: int | None = None
+    """Packets a connection may send at once above the rate, e.g. a full queue
+    re-sent after a reconnect.  None: ``max(64, 2 * (queue_size + 1))``."""
     allow_observers: bool = True
     nonce_source: Callable[[int], bytes] = field(default=secrets.token_bytes, compare=False)
 
@@ -71,6 +83,14 @@ class ServerConfig:
             raise ValueError("idle_timeout must be > 0 seconds (or None)")
         if self.telemetry_every < 0 or self.queue_size < 1 or self.max_connections < 1:
             raise ValueError("telemetry_every >= 0, queue_size >= 1, max_connections >= 1")
+        if self.max_packet_rate is not None and not (
+            self.max_packet_rate > 0 and math.isfinite(self.max_packet_rate)
+        ):
+            raise ValueError("max_packet_rate must be a finite number of packets/s > 0 (or None)")
+        if self.packet_burst is not None and self.packet_burst < 2:
+            raise ValueError(
+                "packet_burst must be >= 2 packets (HELLO and AUTH arrive together), or None"
+            )
         hb, dead = self.timing()
         if hb <= 0:
             raise ValueError("heartbeat_interval must be > 0")
@@ -89,6 +109,12 @@ class ServerConfig:
         if dead is None:
             dead = max(DEADMAN_FLOOR, 2 * self.rtt_hint + 4 * hb)
         return hb, dead
+
+    def burst(self) -> int:
+        """``packet_burst`` with the default applied."""
+        if self.packet_burst is not None:
+            return self.packet_burst
+        return max(64, 2 * (self.queue_size + 1))
 
     def handshake_time(self) -> float:
         if self.handshake_timeout is not None:

@@ -18,6 +18,7 @@ import trio
 from ._connection import _Connection
 from ._events import CloseReason, Event
 from ._packet import PACKET_SIZE
+from ._ratelimit import TokenBucket
 from ._state import SessionState
 
 __all__ = ["Pump"]
@@ -57,7 +58,11 @@ class Pump:
         stream: trio.abc.Stream,
         conn: _Connection,
         on_event: Callable[[Event], None],
+        *,
+        read_limit: TokenBucket | None = None,
     ) -> None:
+        """``read_limit``, if given, counts bytes: the reader takes no more than it
+        holds and sleeps while it is short of one packet (see ``_ratelimit``)."""
         self.stream = stream
         self.conn = conn
         self._on_event = on_event
@@ -71,8 +76,13 @@ class Pump:
         self._close_by: float | None = None
         """When the session closed plus the linger time: flushing and lingering
         together end by then."""
+        self._read_limit = read_limit
         self.bytes_in = 0
         self.bytes_out = 0
+        self.throttles = 0
+        """Times the reader paused because the peer sent faster than ``read_limit``."""
+        self.throttled_for = 0.0
+        """Seconds the reader spent in those pauses."""
 
     @property
     def idle(self) -> bool:
@@ -170,17 +180,36 @@ class Pump:
 
     async def _read(self) -> None:
         conn = self.conn
+        limit = self._read_limit
         while conn.state is not SessionState.CLOSED:
+            want = RECEIVE_CHUNK
+            if limit is not None:
+                want = await self._allowance(limit)
             try:
-                data = bytes(await self.stream.receive_some(RECEIVE_CHUNK))
+                data = bytes(await self.stream.receive_some(want))
             except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
                 log.debug("stream failed: %r", exc)
                 data = b""
+            if limit is not None:
+                limit.spend(len(data), trio.current_time())
             self.bytes_in += len(data)
             conn.receive_data(data, trio.current_time())
             self.kick()
             if not data:
                 return
+
+    async def _allowance(self, limit: TokenBucket) -> int:
+        """Bytes the reader may ask for now, after sleeping until that is at least
+        one packet.  The sleep is where a flooding peer's cost lands: its bytes
+        wait in the transport, which in turn stops accepting them."""
+        wait = limit.wait_for(PACKET_SIZE, trio.current_time())
+        if wait > 0:
+            if not self.throttles:
+                log.info("the peer sends faster than its packet-rate limit; reading it more slowly")
+            self.throttles += 1
+            self.throttled_for += wait
+            await trio.sleep(wait)
+        return max(PACKET_SIZE, min(RECEIVE_CHUNK, int(limit.available(trio.current_time()))))
 
     async def _timer(self) -> None:
         conn = self.conn

@@ -47,7 +47,9 @@ from ._events import (
     SessionParameters,
 )
 from ._memory import Lookup, RequestMemory, StoredFailure, StoredReply, StoredSuccess
+from ._packet import PACKET_SIZE
 from ._pump import Pump
+from ._ratelimit import TokenBucket
 from ._server_connection import ServerConnection
 
 __all__ = ["Server", "ServerStatistics"]
@@ -83,6 +85,10 @@ class ServerStatistics:
     telemetry_sent: int
     telemetry_skipped: int
     """Samples not sent because the connection was still writing (slow line)."""
+    throttled: int
+    """Times a connection's reads were paused because it sent faster than
+    ``ServerConfig.max_packet_rate`` (a flood, or a controller bursting past
+    ``packet_burst``); its bytes waited, none were dropped."""
 
 
 @dataclass(slots=True)
@@ -107,7 +113,13 @@ class _Link:
             now=trio.current_time(),
             nonce_source=cfg.nonce_source,
         )
-        self.pump = Pump(stream, self.conn, lambda ev: server._on_event(self, ev))
+        limit = None
+        if cfg.max_packet_rate is not None:
+            # Counted in bytes so that garbage costs the same as packets.
+            limit = TokenBucket(
+                cfg.max_packet_rate * PACKET_SIZE, cfg.burst() * PACKET_SIZE, trio.current_time()
+            )
+        self.pump = Pump(stream, self.conn, lambda ev: server._on_event(self, ev), read_limit=limit)
         self.identity: ControllerIdentity | None = None
         self.role: Role | None = None
         self.granted = trio.Event()
@@ -168,6 +180,7 @@ class Server:
                 "bad_packets",
                 "telemetry_sent",
                 "telemetry_skipped",
+                "throttled",
             ),
             0,
         )
@@ -208,7 +221,14 @@ class Server:
             controller_connected=holder_link is not None,
             queue_depth=len(self._queue),
             running=self._running.command.code if self._running else None,
-            **self._stats,
+            **(
+                self._stats
+                | {
+                    # Closed connections' pauses, plus those of the open ones so far.
+                    "throttled": self._stats["throttled"]
+                    + sum(link.pump.throttles for link in self._links)
+                }
+            ),
         )
 
     # --- serving --------------------------------------------------------------
@@ -230,6 +250,7 @@ class Server:
                 nursery.cancel_scope.cancel()
         finally:
             self._links.discard(link)
+            self._stats["throttled"] += link.pump.throttles
             if not link.conn.closed:  # cancelled from outside: the session is over
                 link.conn.close(CloseReason.SHUTDOWN, trio.current_time())
                 link.pump.drain_events()

@@ -26,6 +26,7 @@ Here, on a running Server:
 from __future__ import annotations
 
 import random
+from collections.abc import Awaitable, Callable
 from functools import partial
 
 import pytest
@@ -36,13 +37,19 @@ from tcpstream import (
     PACKET_SIZE,
     ArmClient,
     AuthenticationFailed,
+    ClientConnection,
     CommandCode,
+    Completed,
+    ControllerIdentity,
     Failed,
     Granted,
     PacketKind,
     Refused,
+    Role,
     Server,
     ServerConfig,
+    SessionEnded,
+    SessionState,
     commands,
     connect_tcp,
     decode_packet,
@@ -173,7 +180,11 @@ def test_a_command_flood_is_bounded_by_the_queue() -> None:
     every one is answered, none is dropped silently, the queue never grows past
     its bound, and everything accepted runs exactly once."""
     # A long deadman: this hand-driven controller sends no heartbeats.
-    config = ServerConfig(rtt_hint=0.2, queue_size=8, idle_timeout=None, dead_time=600.0)
+    # No packet-rate limit: all 500 must reach the queue in one burst (the rate
+    # limit has its own tests below).
+    config = ServerConfig(
+        rtt_hint=0.2, queue_size=8, idle_timeout=None, dead_time=600.0, max_packet_rate=None
+    )
 
     async def main() -> None:
         async with serving(config) as (server, arm, opener):
@@ -208,6 +219,129 @@ def test_a_command_flood_is_bounded_by_the_queue() -> None:
             assert len(arm.executed) == len(done)
 
     run(main)
+
+
+async def _status_flood(
+    peer_send: Callable[[bytes], Awaitable[object]],
+    receive: Callable[[], Awaitable[bytes | bytearray]],
+    client: ClientConnection,
+    count: int,
+    started: float,
+) -> list[tuple[float, int]]:
+    """Write ``count`` STATUS commands at once and, at the same time (a peer
+    that reads nothing while its write blocks is rightly dropped as STALLED),
+    read until every one is answered; returns (time since ``started``, answers
+    so far) after each read."""
+    now = trio.current_time()
+    for rid in range(1, count + 1):
+        client.send_command(rid, commands.status(), now)
+    answered: set[int] = set()
+    progress: list[tuple[float, int]] = []
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(peer_send, client.data_to_send())
+        while len(answered) < count:
+            chunk = await receive()
+            assert chunk, "the server closed the flooding connection"
+            client.receive_data(bytes(chunk), trio.current_time())
+            while (ev := client.next_event()) is not None:
+                if isinstance(ev, Completed):
+                    assert ev.request_id not in answered  # exactly once
+                    answered.add(ev.request_id)
+                else:
+                    assert not isinstance(ev, (Failed, SessionEnded)), ev
+            progress.append((trio.current_time() - started, len(answered)))
+    return progress
+
+
+def test_a_packet_flood_is_slowed_to_the_rate_limit_and_nothing_is_lost() -> None:
+    """2000 STATUS packets written at once by an authenticated controller, on the
+    virtual clock: the server answers them no faster than ``packet_burst`` plus
+    ``max_packet_rate`` per second -- every one of them, exactly once, in the
+    end (throttled reads, not drops) -- and counts the pauses.  Meanwhile an
+    observer connects and is granted: the flood does not starve other peers."""
+    rate, burst, count = 200.0, 32, 2000
+    config = ServerConfig(
+        key=KEY,
+        rtt_hint=0.2,
+        idle_timeout=None,
+        dead_time=600.0,
+        max_packet_rate=rate,
+        packet_burst=burst,
+    )
+
+    async def main() -> None:
+        async with serving(config) as (server, _arm, opener):
+            started = trio.current_time()  # before the server's bucket exists
+            peer, client, _ = await _session(opener)
+            observer_granted: list[float] = []
+
+            async def observer() -> None:
+                await trio.sleep(1.0)  # well into the flood
+                client_end, server_end = trio.testing.memory_stream_pair()
+                opener._nursery.start_soon(server.serve_stream, server_end)
+
+                async def factory() -> trio.abc.Stream:
+                    return client_end
+
+                t0 = trio.current_time()
+                async with ArmClient(factory, key=KEY, identity="watch", role=Role.OBSERVER):
+                    observer_granted.append(trio.current_time() - t0)
+
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(observer)
+                progress = await _status_flood(
+                    peer.send, peer.stream.receive_some, client, count, started
+                )
+            # HELLO and AUTH came out of the same bucket: two more packets.
+            for elapsed, answered in progress:
+                assert answered + 2 <= burst + rate * elapsed + 1, (elapsed, answered)
+            assert progress[-1][0] >= (count + 2 - burst) / rate  # it really was slowed
+            assert server.statistics().throttled > 0
+            assert len(observer_granted) == 1
+            assert observer_granted[0] < 1.0  # virtual seconds: not queued behind the flood
+
+    run(main)
+
+
+def test_a_packet_flood_on_loopback_is_throttled_not_dropped() -> None:
+    """The same on 127.0.0.1, bounded in count (1500 packets, 324 kB) and by
+    WALL_GUARD: all answered exactly once and the pauses counted.  The bound on
+    answers per second is the limiter's own arithmetic on the same monotonic
+    clock, so it holds on any machine (a slow one answers fewer, never more)."""
+    rate, burst, count = 1000.0, 64, 1500
+    config = ServerConfig(
+        key=KEY, rtt_hint=0.05, idle_timeout=None, max_packet_rate=rate, packet_burst=burst
+    )
+    arm = FakeArm(move_time=0.01)
+
+    async def main() -> None:
+        with trio.fail_after(WALL_GUARD):
+            async with Server(arm, config) as server, trio.open_nursery() as nursery:
+                listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+                port = listeners[0].socket.getsockname()[1]
+                nursery.start_soon(server.serve_listeners, listeners)
+                started = trio.current_time()
+                stream = await trio.open_tcp_stream("127.0.0.1", port)
+                async with stream:
+                    client = ClientConnection(ControllerIdentity("flood", 1), key=KEY, now=started)
+                    client.connect(started)
+                    while client.state is not SessionState.OPEN:
+                        await stream.send_all(client.data_to_send())
+                        chunk = await stream.receive_some()
+                        assert chunk
+                        client.receive_data(chunk, trio.current_time())
+                        while client.next_event() is not None:
+                            pass
+                    progress = await _status_flood(
+                        stream.send_all, stream.receive_some, client, count, started
+                    )
+                stats = server.statistics()
+                nursery.cancel_scope.cancel()
+        for elapsed, answered in progress:
+            assert answered + 2 <= burst + rate * elapsed + 1, (elapsed, answered)
+        assert stats.throttled > 0
+
+    trio.run(main)
 
 
 async def _flood_one(port: int, rng: random.Random, kind: int, bytes_budget: int) -> str:
