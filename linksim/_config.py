@@ -57,15 +57,20 @@ def _check_nonnegative(name: str, value: float) -> None:
 
 @dataclass(frozen=True, slots=True)
 class GilbertElliott:
-    """Gilbert-Elliott burst errors: a two-state Markov chain stepped once per byte.
+    """Gilbert-Elliott burst errors: a two-state Markov chain stepped once per character time.
 
     In the *good* state each byte is hit with probability ``error_good``, in the
-    *bad* state with ``error_bad``.  After each byte the chain leaves the good
-    state with probability ``p_good_to_bad`` and the bad state with
-    ``p_bad_to_good``, so a bad burst lasts on average ``1 / p_bad_to_good``
-    bytes (geometrically distributed) and the long-run fraction of bad bytes is
-    ``p_good_to_bad / (p_good_to_bad + p_bad_to_good)``.  A hit corrupts the
-    byte (random bit flips) or, with ``drop=True``, removes it.
+    *bad* state with ``error_bad``.  Every character time of the line (10 bits
+    at its rate), sent on or idle, the chain leaves the good state with
+    probability ``p_good_to_bad`` and the bad state with ``p_bad_to_good``, so a
+    bad burst lasts on average ``1 / p_bad_to_good`` character times
+    (geometrically distributed) -- the same span of time whether the direction
+    carries bulk data or one ACK a second -- and the long-run fraction of bad
+    time is ``p_good_to_bad / (p_good_to_bad + p_bad_to_good)``.  Under
+    back-to-back traffic that is exactly a chain stepped once per byte.  On a
+    line without a rate there is no character time: the chain steps once per
+    byte sent.  A hit corrupts the byte (random bit flips) or, with
+    ``drop=True``, removes it.
     """
 
     p_good_to_bad: float

@@ -40,6 +40,10 @@ __all__ = ["DirectionStatistics", "LinkDirection"]
 _F64 = npt.NDArray[np.float64]
 _U8 = npt.NDArray[np.uint8]
 _BOOL = npt.NDArray[np.bool_]
+_I64 = npt.NDArray[np.int64]
+
+_GE_BATCH = 256
+"""Good-bad sojourn pairs drawn at a time by the Gilbert-Elliott walk."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,7 +56,9 @@ class DirectionStatistics:
     to be settled.  ``bytes_delayed`` counts delivered-to-be bytes that arrive
     later than they were written, ``max_latency``/``total_latency`` are seconds
     from write to arrival over those bytes.  ``bursts`` is the number of
-    Gilbert-Elliott bad states entered and ``burst_bytes`` the bytes sent in one.
+    Gilbert-Elliott bad states that met at least one byte (a fade on an idle
+    line harms nothing and is not counted) and ``burst_bytes`` the bytes sent
+    in one.
     """
 
     bytes_sent: int = 0
@@ -166,11 +172,13 @@ class LinkDirection:
         self._in_flight = 0
         self._faults = [_FaultState(f) for f in config.faults]
         self._corrupt_at: dict[int, int] = {}  # absolute position -> xor (packet CORRUPT)
-        # Gilbert-Elliott walk: upcoming sojourn lengths; the first may be partly used.
+        # Gilbert-Elliott walk, in character slots of line time (see _burst_states):
+        # upcoming sojourn lengths, the first of which may be partly used.
         self._ge_runs = np.empty(0, dtype=np.int64)
         self._ge_first_bad = False
-        self._ge_first_fresh = True
+        self._ge_first_counted = False  # the partly used first run already met a byte
         self._ge_next_bad = False
+        self._ge_slot: int | None = None  # the next slot the walk has not passed
         self._counts: dict[str, int] = {
             k: 0 for k in DirectionStatistics.__slots__ if k not in ("max_latency", "total_latency")
         }
@@ -345,7 +353,7 @@ class LinkDirection:
 
         # 3. Gilbert-Elliott bursts.
         if cfg.burst is not None:
-            bad = self._burst_states(n)
+            bad = self._burst_states(deps)
             counts["burst_bytes"] += int(bad.sum())
             p = np.where(bad, cfg.burst.error_bad, cfg.burst.error_good)
             hit = (self._rng_hit.random(n) < p) & keep
@@ -502,44 +510,114 @@ class LinkDirection:
         self._counts["dropped_scripted"] += int(seg.sum())
         seg[:] = False
 
-    def _burst_states(self, n: int) -> _BOOL:
-        """The Gilbert-Elliott state (True = bad) of the next ``n`` bytes."""
+    def _burst_states(self, deps: _F64) -> _BOOL:
+        """The Gilbert-Elliott state (True = bad) of bytes leaving the UART at ``deps``.
+
+        The chain steps once per *character time* of the line, whether or not a
+        byte is being sent: a fade is a property of the channel, so it lasts the
+        same wall-clock time on a busy data direction and on a sparse ACK
+        direction.  (Stepping per byte sent made a 10-byte fade on a line
+        carrying one ACK a second last minutes.)  Back-to-back bytes occupy
+        consecutive slots, so under continuous traffic this is the per-byte chain
+        of the config's docstring.  On a line without a rate there is no
+        character time, and the chain steps once per byte.
+        """
+        n = len(deps)
+        prev = self._ge_slot
+        if self._c > 0.0:
+            slots = np.rint(deps / self._c).astype(np.int64)
+            if prev is None:
+                prev = int(slots[0])
+            # Strictly increasing, at least one slot apart (rounding never merges two bytes).
+            steps = np.maximum(np.diff(slots, prepend=prev - 1), 1)
+            slots = (prev - 1) + np.cumsum(steps)
+        else:
+            if prev is None:
+                prev = 0
+            slots = prev + np.arange(n, dtype=np.int64)
+        burst = self.config.burst
+        assert burst is not None
+        # Idle stretches far longer than a good-bad cycle are crossed in one
+        # exact step (below) instead of by drawing every sojourn in them.
+        far = int(64 * (1.0 / burst.p_good_to_bad + 1.0 / burst.p_bad_to_good))
+        gaps = np.flatnonzero(np.diff(slots, prepend=prev) > far)
+        states = np.empty(n, dtype=np.bool_)
+        pos, start = prev, 0
+        for stop in [*gaps.tolist(), n]:
+            if stop > start:
+                hits = slots[start:stop] - pos
+                states[start:stop] = self._ge_walk(int(hits[-1]) + 1, hits)
+                pos = int(slots[stop - 1]) + 1
+            if stop < n:
+                self._ge_jump(int(slots[stop]) - pos)
+                pos = int(slots[stop])
+            start = stop
+        self._ge_slot = pos
+        return states
+
+    def _ge_jump(self, gap: int) -> None:
+        """Cross ``gap`` idle slots at once: the state after them is drawn from the
+        chain's exact ``gap``-step transition, and by the geometric law's lack of
+        memory the sojourn it is in starts afresh."""
+        burst = self.config.burst
+        assert burst is not None
+        a, b = burst.p_good_to_bad, burst.p_bad_to_good
+        bad_now = self._ge_first_bad if len(self._ge_runs) else self._ge_next_bad
+        stationary = a / (a + b)
+        p_bad = stationary + (float(bad_now) - stationary) * (1.0 - a - b) ** gap
+        self._ge_runs = np.empty(0, dtype=np.int64)
+        self._ge_next_bad = bool(self._rng_walk.random() < p_bad)
+        self._ge_first_counted = False
+
+    def _ge_walk(self, length: int, hits: _I64) -> _BOOL:
+        """Walk ``length`` slots; the states at the offsets ``hits`` (sorted, distinct).
+
+        ``bursts`` counts the bad sojourns that met at least one byte.
+        """
         burst = self.config.burst
         assert burst is not None
         runs = self._ge_runs
-        # Expected sojourn pairs per byte; draw a little more than needed at a time.
-        per_pair = 1.0 / burst.p_good_to_bad + 1.0 / burst.p_bad_to_good
-        while int(runs.sum()) < n:
-            if len(runs) == 0:
-                self._ge_first_bad = self._ge_next_bad
-            k = int(n / per_pair) + 8
-            good = self._rng_walk.geometric(burst.p_good_to_bad, size=k)
-            bad = self._rng_walk.geometric(burst.p_bad_to_good, size=k)
-            pair = np.empty(2 * k, dtype=np.int64)
+        if len(runs) == 0:
+            self._ge_first_bad = self._ge_next_bad
+            self._ge_first_counted = False
+        # Sojourns are drawn in batches of a fixed size, only when needed: the
+        # random stream then does not depend on how the traffic was split into
+        # writes, so neither do the bursts.
+        batches = [runs]
+        have = int(runs.sum())
+        while have < length:
+            good = self._rng_walk.geometric(burst.p_good_to_bad, size=_GE_BATCH)
+            bad = self._rng_walk.geometric(burst.p_bad_to_good, size=_GE_BATCH)
+            pair = np.empty(2 * _GE_BATCH, dtype=np.int64)
             first, second = (bad, good) if self._ge_next_bad else (good, bad)
             pair[0::2] = first
             pair[1::2] = second
-            runs = np.concatenate([runs, pair])
+            batches.append(pair)
+            have += int(pair.sum())
+        if len(batches) > 1:
+            runs = np.concatenate(batches)
         cum = np.cumsum(runs)
-        j = int(np.searchsorted(cum, n, side="left"))
-        used = runs[: j + 1].copy()
-        used[-1] -= int(cum[j]) - n
+        j = int(np.searchsorted(cum, length, side="left"))
         run_bad = ((np.arange(j + 1) % 2) == 1) != self._ge_first_bad
-        fresh = np.ones(j + 1, dtype=np.bool_)
-        fresh[0] = self._ge_first_fresh
-        self._counts["bursts"] += int((run_bad & fresh).sum())
-        states: _BOOL = np.repeat(run_bad, used)
-        left = int(cum[j]) - n
+        which = np.searchsorted(cum, hits, side="right")  # the run each hit falls in
+        met = np.zeros(j + 1, dtype=np.bool_)
+        met[which] = True
+        first_counted = self._ge_first_counted
+        new = met.copy()
+        new[0] &= not first_counted
+        self._counts["bursts"] += int((run_bad & new).sum())
+        left = int(cum[j]) - length
         rest = runs[j:].copy()
         if left:
             rest[0] = left
             self._ge_first_bad = bool(run_bad[-1])
-            self._ge_first_fresh = False
+            self._ge_first_counted = bool(met[j]) or (j == 0 and first_counted)
         else:
             rest = rest[1:]
             self._ge_first_bad = not bool(run_bad[-1])
-            self._ge_first_fresh = True
+            self._ge_first_counted = False
         # The state of the run that follows the last queued one (runs alternate).
         self._ge_next_bad = self._ge_first_bad != (len(rest) % 2 == 1)
         self._ge_runs = rest
+        states: _BOOL = run_bad[which]
         return states

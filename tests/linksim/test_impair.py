@@ -161,6 +161,72 @@ def test_gilbert_elliott_bursts_match_parameters() -> None:
     assert gaps.mean() == pytest.approx(1 / p_gb, rel=0.05)
 
 
+def _burst_errors(d: LinkDirection, times: np.ndarray) -> np.ndarray:
+    """Send one zero byte at each time; which of them arrived corrupted."""
+    for t in times.tolist():
+        d.send(b"\0", t)
+    return np.frombuffer(d.receive(1e12), np.uint8) != 0
+
+
+def _runs(err: np.ndarray) -> np.ndarray:
+    edges = np.diff(np.concatenate([[0], err.astype(np.int8), [0]]))
+    return np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
+
+
+def test_gilbert_elliott_steps_in_line_time_not_per_byte_sent() -> None:
+    """On a rated line the chain steps once per character time, sent on or idle.
+    Back-to-back bytes see the per-byte chain; bytes one second apart on a 2400
+    bit/s line (240 character times) see nearly independent states -- a fade of
+    10 character times must not swallow ten one-a-second ACKs in a row."""
+    p_gb, p_bg = 0.01, 0.1
+    burst = GilbertElliott(p_gb, p_bg, error_good=0.0, error_bad=1.0)
+    config = DirectionConfig(rate=2400, burst=burst)
+    c = config.char_time
+    d = LinkDirection(config, seed=3)
+    for k in range(200):
+        d.send(bytes(1000), k * 1000 * c)  # back to back, in 1000-byte writes
+    busy = np.frombuffer(d.receive(1e12), np.uint8) != 0
+    assert _runs(busy).mean() == pytest.approx(1 / p_bg, rel=0.05)
+    assert busy.mean() == pytest.approx(p_gb / (p_gb + p_bg), rel=0.08)
+
+    d = LinkDirection(config, seed=4)
+    sparse = _burst_errors(d, np.arange(20_000) * 1.0)
+    assert sparse.mean() == pytest.approx(p_gb / (p_gb + p_bg), rel=0.1)
+    # Two bytes a second apart are both bad with about the stationary chance,
+    # so bad runs of sparse bytes are ~1.1 long, not 1/p_bg = 10.
+    assert _runs(sparse).mean() < 1.3
+    # A 10-character burst never spans two bytes 240 character times apart.
+    assert d.statistics().bursts == sparse.sum()
+
+
+def test_gilbert_elliott_crosses_long_idle_gaps_exactly_and_reproducibly() -> None:
+    """Gaps far longer than a good-bad cycle (hours of idle line) are crossed in
+    one step drawn from the exact n-step transition: the states of bytes an
+    hour apart follow the stationary law, and the same seed and times give the
+    same states."""
+    p_gb, p_bg = 0.02, 0.2
+    burst = GilbertElliott(p_gb, p_bg, error_good=0.0, error_bad=1.0)
+    config = DirectionConfig(rate=9600, burst=burst)
+    times = np.arange(5000) * 3600.0
+    first = _burst_errors(LinkDirection(config, seed=8), times)
+    again = _burst_errors(LinkDirection(config, seed=8), times)
+    assert (first == again).all()
+    assert first.mean() == pytest.approx(p_gb / (p_gb + p_bg), abs=0.02)
+    # A mix of back-to-back writes and long gaps keeps write boundaries irrelevant
+    # within a busy stretch: 100 bytes in one write or in ten are hit at the same
+    # places (with error_bad = 1 a hit is exactly a bad state).
+    c = config.char_time
+    one, ten = LinkDirection(config, seed=2), LinkDirection(config, seed=2)
+    for hour in range(50):
+        one.send(bytes(100), hour * 3600.0)
+        for k in range(10):
+            ten.send(bytes(10), hour * 3600.0 + 10 * k * c)
+    hit_one = np.frombuffer(one.receive(1e12), np.uint8) != 0
+    hit_ten = np.frombuffer(ten.receive(1e12), np.uint8) != 0
+    assert hit_one.any()
+    assert (hit_one == hit_ten).all()
+
+
 def test_burst_drop_mode_removes_bytes() -> None:
     config = DirectionConfig(burst=GilbertElliott(0.01, 0.1, error_bad=1.0, drop=True))
     d = LinkDirection(config, seed=9)
