@@ -102,16 +102,15 @@ def _window_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
 def _session_figures(client: ArmClient) -> dict[str, Any]:
     """A command session's own figures (all a TCP link has): in flight, packets, bytes."""
     stats = client.statistics()
-    conn = stats.get("connection")
     out: dict[str, Any] = {
-        "pending": stats["pending"],
-        "reconnects": stats["reconnects"],
-        "bytes_sent": stats["bytes_sent"],
-        "bytes_received": stats["bytes_received"],
+        "pending": stats.pending,
+        "reconnects": stats.reconnects,
+        "bytes_sent": stats.bytes_sent,
+        "bytes_received": stats.bytes_received,
     }
-    if conn is not None:
-        out["packets_sent"] = getattr(conn, "packets_out", 0)
-        out["packets_received"] = getattr(conn, "packets_in", 0)
+    if stats.connection is not None:
+        out["packets_sent"] = stats.connection.packets_out
+        out["packets_received"] = stats.connection.packets_in
     return out
 
 

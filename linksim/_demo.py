@@ -151,19 +151,15 @@ def serial_link_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
 def client_link_figures(client: ArmClient) -> dict[str, Any]:
     """What the command session itself counted (all a TCP run has)."""
     stats = client.statistics()
-    conn = stats.get("connection")
     out: dict[str, Any] = {
-        "reconnects": stats["reconnects"],
-        "telemetry_dropped": stats["telemetry_dropped"],
+        "reconnects": stats.reconnects,
+        "telemetry_dropped": stats.telemetry_dropped,
+        "bytes_sent": stats.bytes_sent,
+        "bytes_received": stats.bytes_received,
     }
-    if conn is not None:
-        for name in ("bytes_sent", "bytes_received", "packets_sent", "packets_received"):
-            value = getattr(conn, name, None)
-            if value is not None:
-                out[name] = value
-        rtt = getattr(conn, "smoothed_rtt", None)
-        if rtt is not None:
-            out["rtt_s"] = rtt
+    if stats.connection is not None:
+        out["packets_sent"] = stats.connection.packets_out
+        out["packets_received"] = stats.connection.packets_in
     return out
 
 
@@ -262,7 +258,7 @@ async def _run_virtual(options: DemoOptions) -> DemoReport:
                     nonce_source=rng.randbytes,
                 ) as client:
                     await drive(client, run, options, probe, run_title(options, "virtual time"))
-                    figures = probe() | client_link_figures(client)
+                    figures = client_link_figures(client) | probe()  # the line's own figures win
             except (SessionError, trio.BrokenResourceError, OSError) as exc:
                 error = explain_failure(exc)
             nursery.cancel_scope.cancel()

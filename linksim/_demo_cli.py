@@ -166,7 +166,7 @@ async def _control_session(
         try:
             async with connect_stream(sock, identity=IDENTITY, key=key) as arm:
                 await drive(arm, run, options, lambda: serial_link_figures(sock), title)
-                figures.update(serial_link_figures(sock) | client_link_figures(arm))
+                figures.update(client_link_figures(arm) | serial_link_figures(sock))
         finally:
             await sock.aclose()
 

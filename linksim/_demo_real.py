@@ -198,7 +198,7 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
                             lambda: serial_link_figures(sock),
                             run_title(options, "real time, ptys"),
                         )
-                        holder["figures"] = serial_link_figures(sock) | client_link_figures(client)
+                        holder["figures"] = client_link_figures(client) | serial_link_figures(sock)
                 finally:
                     with trio.move_on_after(endpoint.derived_dead_after()) as s:
                         s.shield = True

@@ -20,7 +20,7 @@ and the session are specified byte by byte in ``tcpstream/PROTOCOL.md``.
 from . import _builders as commands
 from ._api import DEFAULT_PORT, connect_stream, connect_tcp, serve_stream, serve_tcp
 from ._blocking import BlockingClient
-from ._client import ArmClient, CommandHandle
+from ._client import ArmClient, ClientStatistics, CommandHandle
 from ._client_connection import ClientConnection
 from ._commands import (
     ARGUMENT_WORDS,
@@ -107,6 +107,7 @@ __all__ = [
     "BadVersion",
     "BlockingClient",
     "ClientConnection",
+    "ClientStatistics",
     "CloseReason",
     "Command",
     "CommandCode",

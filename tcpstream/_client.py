@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import secrets
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from dataclasses import dataclass
 from types import TracebackType
 
 import trio
@@ -37,6 +38,7 @@ from ._commands import (
     Feedback,
     validate_arguments,
 )
+from ._connection import ConnectionStatistics
 from ._errors import AuthenticationFailed, LocalProtocolError, Refused, SessionClosed
 from ._events import (
     Accepted,
@@ -56,7 +58,7 @@ from ._events import (
 )
 from ._pump import Pump
 
-__all__ = ["ArmClient", "CommandHandle", "StreamFactory"]
+__all__ = ["ArmClient", "ClientStatistics", "CommandHandle", "StreamFactory"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +80,26 @@ _FINAL_REASONS = frozenset(
     }
 )
 """Session ends after which reconnecting would be wrong."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ClientStatistics:
+    """What an operator reads about a controller's client (:meth:`ArmClient.statistics`)."""
+
+    pending: int
+    """Commands sent and not yet settled (COMPLETED or FAILED)."""
+    reconnects: int
+    """Times the session was resumed over a new stream."""
+    telemetry_dropped: int
+    """Samples a slow subscriber did not take in time (newest dropped)."""
+    rejected_by_arm: int
+    """FAILED replies matching no command: packets the arm could not use."""
+    bytes_sent: int
+    """On the current stream (0 between streams)."""
+    bytes_received: int
+    connection: ConnectionStatistics | None
+    """The current session's packet counters (packets, bad packets, replays,
+    heartbeats); None between streams."""
 
 
 class CommandHandle:
@@ -482,23 +504,18 @@ class ArmClient:
         finally:
             self._subscribers.discard(send)
 
-    def statistics(self) -> dict[str, object]:
-        """Counters for an operator: ``pending`` commands, ``reconnects``,
-        ``telemetry_dropped``, ``rejected_by_arm`` (FAILED replies not matching a
-        command: packets the arm could not use), ``bytes_sent`` / ``bytes_received``
-        on the current stream, and ``connection``: the current
-        :class:`ConnectionStatistics` (packets, bad packets, replays, heartbeats).
-        """
+    def statistics(self) -> ClientStatistics:
+        """A snapshot of the client's counters (see :class:`ClientStatistics`)."""
         pump = self._pump
-        return {
-            "pending": len(self._pending),
-            "reconnects": self.reconnects,
-            "telemetry_dropped": self.telemetry_dropped,
-            "rejected_by_arm": self.rejected_by_arm,
-            "bytes_sent": pump.bytes_out if pump is not None else 0,
-            "bytes_received": pump.bytes_in if pump is not None else 0,
-            "connection": pump.conn.statistics() if pump is not None else None,
-        }
+        return ClientStatistics(
+            pending=len(self._pending),
+            reconnects=self.reconnects,
+            telemetry_dropped=self.telemetry_dropped,
+            rejected_by_arm=self.rejected_by_arm,
+            bytes_sent=pump.bytes_out if pump is not None else 0,
+            bytes_received=pump.bytes_in if pump is not None else 0,
+            connection=pump.conn.statistics() if pump is not None else None,
+        )
 
     # --- one method per command -------------------------------------------------
 

@@ -220,6 +220,7 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "CommandReceived",
             "CommandResult",
             "Completed",
+            "ClientStatistics",
             "ConnectionStatistics",
             "ControlRequested",
             "ControllerIdentity",
