@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from linksim import DEFAULT_WORLD, DemoOptions, LinkConfig, ObjectSpec, rock_task, run_demo
+from tcpstream import PACKET_SIZE
 
 LINKSIM = [sys.executable, "-m", "linksim"]
 N_COMMANDS = len(rock_task(DEFAULT_WORLD).commands)
@@ -73,6 +74,11 @@ def test_virtual_tcp_demo() -> None:
     report = run_demo(virtual(transport="tcp")).as_dict()
     assert_task_done(report)
     assert report["transport"] == "tcp"
+    # A TCP run's figures are the command session's own counters.
+    link = report["link"]
+    assert link["bytes_sent"] == link["packets_sent"] * PACKET_SIZE > 0
+    assert link["bytes_received"] == link["packets_received"] * PACKET_SIZE > 0
+    assert link["goodput_Bps"] > 0
 
 
 def test_a_refused_command_stops_the_arm_and_fails_the_run() -> None:
