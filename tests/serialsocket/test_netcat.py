@@ -1,7 +1,10 @@
 """``serialsocket listen|connect``: a netcat over real ptys through ``linksim relay``.
 
 Everything runs as subprocesses, as a user runs it; each wait has a generous
-timeout that only stops a hang.
+timeout that only stops a hang.  The side that waits for a call is known to
+be ready when it waits for input on its tty (seen in /proc: see
+:func:`~tests.serialsocket.test_kermit_cli.wait_until_reading`), not after a
+fixed sleep.
 """
 
 from __future__ import annotations
@@ -12,10 +15,11 @@ import random
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 
 import pytest
+
+from .test_kermit_cli import wait_until_reading
 
 GUARD = 60.0
 
@@ -37,6 +41,13 @@ def relay() -> Iterator[tuple[str, str]]:
         assert proc.wait(timeout=GUARD) == 0
 
 
+def _reap(proc: subprocess.Popen[bytes]) -> None:
+    """Kill ``proc`` if it is still running (a failed or hung test) and wait for it."""
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=GUARD)
+
+
 def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "serialsocket", *args]
 
@@ -56,29 +67,32 @@ def test_files_both_ways_byte_exact_and_clean_exit(
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
         )
-    time.sleep(0.3)  # let the listener open its port (a connect retries anyway)
-    with (tmp_path / "up").open("rb") as up_in:
-        client = subprocess.run(
-            # The listener is a fresh process that may start slowly on a busy
-            # machine: give the connect time (the derived timeout is ~0.5 s).
-            cli(
-                "connect",
-                a,
-                "--delay",
-                "0.002",
-                "--window",
-                "8",
-                "--trace",
-                "--connect-timeout",
-                "30",
-                "--dead-after",
-                "60",
-            ),
-            stdin=up_in,
-            capture_output=True,
-            timeout=GUARD,
-        )
-    got_up, server_err = server.communicate(timeout=GUARD)
+    try:
+        wait_until_reading(server, b)  # its port is open (a connect retries anyway)
+        with (tmp_path / "up").open("rb") as up_in:
+            client = subprocess.run(
+                # The connect's derived timeout is ~0.5 s: on a busy machine
+                # give it time anyway.
+                cli(
+                    "connect",
+                    a,
+                    "--delay",
+                    "0.002",
+                    "--window",
+                    "8",
+                    "--trace",
+                    "--connect-timeout",
+                    "30",
+                    "--dead-after",
+                    "60",
+                ),
+                stdin=up_in,
+                capture_output=True,
+                timeout=GUARD,
+            )
+        got_up, server_err = server.communicate(timeout=GUARD)
+    finally:
+        _reap(server)
     assert client.returncode == 0, client.stderr[-2000:]
     assert server.returncode == 0, server_err
     assert got_up == upload
@@ -116,11 +130,11 @@ def test_dial_and_answer_through_emulated_modems() -> None:
             "38400",
             "--delay",
             "0.002",
-            # The first RING comes 2 s after ATD: the answering program (a
-            # fresh process) must have reset its modem by then, or its ATZ
-            # would hang up the ringing call.
+            # The first RING comes 0.5 s after ATD.  The answering program
+            # must have reset its modem by then, or its ATZ would hang up the
+            # ringing call: the test starts the caller only once it has.
             "--dial-time",
-            "2.0",
+            "0.5",
             "--ring-interval",
             "0.3",
             "--handshake-time",
@@ -139,23 +153,29 @@ def test_dial_and_answer_through_emulated_modems() -> None:
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
         )
-        time.sleep(0.5)  # the answering side resets its modem and waits for RING
-        client = subprocess.run(
-            [
-                *cli("connect", paths["a"], "--dial", "5551234", "--connect-timeout", "30"),
-                "--dead-after",
-                "60",
-            ],
-            input=upload,
-            capture_output=True,
-            timeout=GUARD,
-        )
-        got, server_err = server.communicate(timeout=GUARD)
-        assert client.returncode == 0, client.stderr
-        assert server.returncode == 0, server_err
-        assert got == upload
-        assert b"CONNECT 38400" in client.stderr
-        assert b"CONNECT 38400" in server_err
+        try:
+            # The answering side has sent ATZ once it waits for the modem's
+            # answer: the reset is on the line before the caller even starts,
+            # so it cannot hang up the call.
+            wait_until_reading(server, paths["b"])
+            client = subprocess.run(
+                [
+                    *cli("connect", paths["a"], "--dial", "5551234", "--connect-timeout", "30"),
+                    "--dead-after",
+                    "60",
+                ],
+                input=upload,
+                capture_output=True,
+                timeout=GUARD,
+            )
+            got, server_err = server.communicate(timeout=GUARD)
+            assert client.returncode == 0, client.stderr
+            assert server.returncode == 0, server_err
+            assert got == upload
+            assert b"CONNECT 38400" in client.stderr
+            assert b"CONNECT 38400" in server_err
+        finally:
+            _reap(server)
     finally:
         relay.send_signal(signal.SIGTERM)
         relay.wait(timeout=GUARD)
