@@ -26,6 +26,10 @@ from ._checks import check_chars as check_chars
 from ._checks import crc16_kermit as crc16_kermit
 from ._config import MAX_WINDOW as MAX_WINDOW
 from ._config import EndpointConfig as EndpointConfig
+from ._driver import LineFailed as LineFailed
+from ._driver import LinkBroken as LinkBroken
+from ._driver import LinkDeadError as LinkDeadError
+from ._driver import PeerAborted as PeerAborted
 from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
 from ._encoding import PRINTABLE as PRINTABLE
 from ._encoding import Encoding as Encoding
@@ -85,10 +89,6 @@ from ._port import PortStatistics as PortStatistics
 from ._port import SerialPort as SerialPort
 from ._port import open_port as open_port
 from ._port import open_pty_pair as open_pty_pair
-from ._socket import LineFailed as LineFailed
-from ._socket import LinkBroken as LinkBroken
-from ._socket import LinkDeadError as LinkDeadError
-from ._socket import PeerAborted as PeerAborted
 from ._socket import SerialListener as SerialListener
 from ._socket import SerialSocket as SerialSocket
 from ._socket import SocketStatistics as SocketStatistics

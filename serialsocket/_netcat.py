@@ -25,10 +25,11 @@ import sys
 import trio
 
 from ._config import MAX_WINDOW, EndpointConfig
+from ._driver import LinkBroken
 from ._errors import LocalProtocolError
 from ._hayes import DialError, ModemConnection, answer, dial
 from ._port import open_port
-from ._socket import LinkBroken, SerialSocket, accept, connect
+from ._socket import SerialSocket, accept, connect
 from ._trace import TracingStream
 from ._wire import DEFAULT_MAX_PACKET_LENGTH
 

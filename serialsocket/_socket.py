@@ -2,18 +2,10 @@
 
 Theory of operation
 -------------------
-A *driver* owns one port (any ``trio.abc.Stream``: a pty or serial device
-wrapped by ``open_port``, an in-memory impaired link, a TCP stream) and one
-sans-I/O :class:`~serialsocket.Endpoint`.  Three tasks move bytes and time:
-
-* the reader feeds everything read from the port into the endpoint;
-* the writer sends whatever the endpoint releases, waking on any change or
-  on the endpoint's pacing timer (``get_send_timer``);
-* the timer task calls ``handle_timer`` at ``get_timer()``.
-
-After any of these, waiters are woken through one "something changed" event,
-and every waiter re-checks its own condition (no lost wake-ups: trio is
-single-threaded, and a waiter takes the event before it awaits it).
+A *driver* (:mod:`serialsocket._driver`) owns one port (any
+``trio.abc.Stream``: a pty or serial device wrapped by ``open_port``, an
+in-memory impaired link, a TCP stream) and one sans-I/O
+:class:`~serialsocket.Endpoint`, and runs the reader, writer and timer tasks.
 
 A :class:`SerialSocket` is a *session* on a driver.  A client's session owns
 the port and closes it on ``aclose``.  A listener's sessions share the port:
@@ -30,7 +22,6 @@ itself failed or reached EOF).
 from __future__ import annotations
 
 import logging
-import math
 import operator
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from contextlib import asynccontextmanager, contextmanager
@@ -39,9 +30,9 @@ from dataclasses import dataclass
 import trio
 
 from ._config import EndpointConfig
+from ._driver import _READ_SIZE, LineFailed, LinkBroken, LinkDeadError, PeerAborted, _Driver
 from ._endpoint import Endpoint, EndpointStatistics
 from ._errors import LocalProtocolError
-from ._events import ConnectionAborted, LinkDead
 from ._port import PortStatistics, port_statistics
 from ._state import TERMINAL, State
 
@@ -61,51 +52,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-_READ_SIZE = 65536
-"""Bytes asked of the port per read: one read can hold many packets."""
-
-_FLUSH_GRACE = 0.5
-"""Seconds (plus the line time of what is pending) allowed to push out a last
-E or ACK when a session is torn down; a local I/O bound, not a protocol timer."""
-
-
-class LinkBroken(Exception):
-    """Base of the causes chained to ``BrokenResourceError``."""
-
-
-class PeerAborted(LinkBroken):
-    """The peer ended the connection with an E packet.
-
-    Attributes:
-        reason: the peer's text.
-    """
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(f"the peer aborted the connection: {reason}")
-        self.reason = reason
-
-
-class LinkDeadError(LinkBroken):
-    """The peer fell silent for longer than ``dead_after``.
-
-    Attributes:
-        report: the endpoint's LinkDead event (bytes acknowledged, in flight,
-            never sent).
-    """
-
-    def __init__(self, report: LinkDead) -> None:
-        super().__init__(
-            f"link dead after {report.silence:.1f} s of silence: "
-            f"{report.bytes_acknowledged} bytes acknowledged, "
-            f"{report.bytes_in_flight} in flight (may or may not have arrived), "
-            f"{report.bytes_unsent} never sent"
-        )
-        self.report = report
-
-
-class LineFailed(LinkBroken):
-    """The port failed or reached EOF (the device went away, the relay stopped)."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -128,168 +74,6 @@ class SocketStatistics:
     port_bytes_in: int
     port_bytes_out: int
     port: PortStatistics | None = None
-
-
-class _Driver:
-    """One port, one endpoint, three tasks (see the module docstring)."""
-
-    def __init__(self, port: trio.abc.Stream, endpoint: Endpoint, *, owns_port: bool) -> None:
-        self.port = port
-        self.ep = endpoint
-        self.owns_port = owns_port
-        self.generation = 0
-        self.broken: LinkBroken | None = None
-        self._changed = trio.Event()
-        self._cancel = trio.CancelScope()
-        self._stopped = trio.Event()
-        self._writer_idle = True
-        self._flushing = 0  # flush() calls waiting for the writer to go idle
-        self._timer_scope: trio.CancelScope | None = None  # the timer task's sleep
-        self.reads = self.writes = self.bytes_in = self.bytes_out = 0
-
-    # -- change notification ----------------------------------------------------
-
-    def notify(self) -> None:
-        """Wake every waiter; each re-checks its own condition.
-
-        The timer task is not among them: it sleeps until the endpoint's
-        deadline, and is only woken (its sleep's deadline moved) when a
-        change brought that deadline earlier.  Waking it on every change
-        cost a task switch per packet for nothing.
-        """
-        self._changed.set()
-        self._changed = trio.Event()
-        scope = self._timer_scope
-        if scope is not None:
-            deadline = self.ep.get_timer()
-            if deadline is not None and deadline < scope.deadline:
-                scope.deadline = deadline
-
-    async def changed(self) -> None:
-        """Wait for the next :meth:`notify`."""
-        await self._changed.wait()
-
-    def now(self) -> float:
-        return trio.current_time()
-
-    def after_input(self) -> None:
-        """Collect endpoint events that end the connection, then wake waiters."""
-        for event in self.ep.events():
-            if isinstance(event, ConnectionAborted) and event.by_peer and self.broken is None:
-                self.broken = PeerAborted(event.reason)
-            elif isinstance(event, LinkDead) and self.broken is None:
-                self.broken = LinkDeadError(event)
-            log.debug("endpoint event: %s", event)
-        self.notify()
-
-    def fail(self, cause: LinkBroken) -> None:
-        if self.broken is None:
-            self.broken = cause
-        self.notify()
-
-    # -- tasks ------------------------------------------------------------------
-
-    async def run(self, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED) -> None:
-        """Run the three tasks until :meth:`stop` (never raises port errors)."""
-        try:
-            with self._cancel:
-                async with trio.open_nursery() as nursery:
-                    nursery.start_soon(self._reader)
-                    nursery.start_soon(self._writer)
-                    nursery.start_soon(self._timer)
-                    task_status.started()
-        finally:
-            self._stopped.set()
-            self.notify()
-
-    async def _reader(self) -> None:
-        while True:
-            try:
-                data = await self.port.receive_some(_READ_SIZE)
-            except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
-                cause = LineFailed(f"reading the line failed: {exc!r}")
-                cause.__cause__ = exc
-                self.fail(cause)
-                return
-            if not data:
-                self.fail(LineFailed("the line reached EOF: the other end of the port closed"))
-                return
-            self.reads += 1
-            self.bytes_in += len(data)
-            self.ep.receive_data(data, self.now())
-            self.after_input()
-
-    async def _writer(self) -> None:
-        while True:
-            data = self.ep.data_to_send(self.now())
-            if data:
-                self._writer_idle = False
-                try:
-                    await self.port.send_all(data)
-                except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
-                    cause = LineFailed(f"writing to the line failed: {exc!r}")
-                    cause.__cause__ = exc
-                    self.fail(cause)
-                    return
-                self.writes += 1
-                self.bytes_out += len(data)
-                continue
-            self._writer_idle = True
-            if self._flushing:
-                self.notify()
-            wake = self.ep.get_send_timer()
-            changed = self._changed
-            if wake is None:
-                await changed.wait()
-            else:
-                # Never closer than a millisecond: a wake time at or before
-                # now with nothing released would otherwise spin.
-                with trio.move_on_at(max(wake, self.now() + 1e-3)):
-                    await changed.wait()
-
-    async def _timer(self) -> None:
-        while True:
-            deadline = self.ep.get_timer()
-            now = self.now()
-            if deadline is not None and deadline <= now:
-                self.ep.handle_timer(now)
-                self.after_input()
-                await trio.lowlevel.checkpoint()
-                continue
-            # Sleep until the deadline; notify() moves it earlier when needed.
-            # A deadline that moved later just wakes this loop early: it
-            # re-reads the timer and sleeps again.
-            with trio.CancelScope(deadline=math.inf if deadline is None else deadline) as scope:
-                self._timer_scope = scope
-                try:
-                    await trio.sleep_forever()
-                finally:
-                    self._timer_scope = None
-
-    # -- teardown -----------------------------------------------------------------
-
-    async def flush(self) -> None:
-        """Give the writer a bounded moment to push out what is pending (shielded)."""
-        with trio.CancelScope(shield=True):
-            pending = self.ep.statistics().line_backlog
-            self._flushing += 1
-            try:
-                with trio.move_on_after(_FLUSH_GRACE + pending):
-                    self.notify()
-                    await trio.lowlevel.checkpoint()
-                    while (
-                        not self._writer_idle and self.broken is None and not self._stopped.is_set()
-                    ):
-                        await self.changed()
-            finally:
-                self._flushing -= 1
-
-    async def stop(self) -> None:
-        """Stop the tasks and close the port if it is ours (prompt; shielded)."""
-        self._cancel.cancel()
-        with trio.CancelScope(shield=True):
-            if self.owns_port:
-                await trio.aclose_forcefully(self.port)
 
 
 class SerialSocket(trio.abc.HalfCloseableStream):
