@@ -92,8 +92,11 @@ def _print_stats(stats: KermitStatistics) -> None:
 
 def kermit_main(args: argparse.Namespace) -> int:
     """Run ``kermit send`` / ``kermit receive``; returns the exit status."""
-    if args.verbose:
-        logging.basicConfig(level=logging.INFO, format="kermit: %(message)s")
+    # Warnings (a file name shortened to fit a packet) always show; -v adds a
+    # line per file.
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="kermit: %(message)s"
+    )
     try:
         config = _config(args)
         stats = trio.run(_run, args, config)

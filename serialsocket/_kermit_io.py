@@ -206,4 +206,6 @@ def _log_event(event: KermitEvent) -> None:
         else:
             log.info("transfer complete (every file acknowledged; the ACK of B was lost)")
     elif isinstance(event, TransferFailed):
-        log.warning("transfer failed: %s", event.message)
+        # Info, not a warning: the failure is raised (KermitTransferError) and
+        # reported by whoever catches it; a warning here printed it twice.
+        log.info("transfer failed: %s", event.message)

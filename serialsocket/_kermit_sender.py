@@ -6,8 +6,10 @@ are in :mod:`serialsocket._kermit`; this module is the sending role.
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 from collections.abc import Sequence
+from pathlib import PurePosixPath
 
 from ._kermit import (
     _BREAK_RETRIES,
@@ -23,6 +25,8 @@ from ._kermit_params import KermitConfig
 from ._kermit_window import SendSlot, SendWindow
 from ._packet import Packet, data_capacity
 from ._wire import SEQ_MODULUS, PacketType
+
+log = logging.getLogger(__name__)
 
 __all__ = ["KermitSender"]
 
@@ -155,10 +159,47 @@ class KermitSender(KermitSide):
         self._eof = self._discard = False
         self._goto(KermitState.SEND_FILE)
         assert self._neg is not None
-        name = self._neg.send_encoding.encode(self._file.name.encode("utf-8", "replace"))
         capacity = data_capacity(self._neg.send_max_length, self._neg.check)
-        self._send(PacketType.FILE, name[:capacity], now)
+        self._send(PacketType.FILE, self._file_name(self._file.name, capacity), now)
         self._events.append(FileStarted(self._file.name))
+
+    def _file_name(self, name: str, capacity: int) -> bytes:
+        """``name`` encoded for the F packet, shortened to fit ``capacity`` if need be.
+
+        Shortened by whole characters, before encoding -- cutting the encoded
+        bytes could split a prefix pair (a malformed packet the receiver
+        rejects) or a UTF-8 sequence -- and keeping a short extension, so the
+        receiver still knows what the file is.
+        """
+        assert self._neg is not None
+        encoding = self._neg.send_encoding
+
+        def encoded(text: str) -> bytes:
+            return encoding.encode(text.encode("utf-8", "replace"))
+
+        whole = encoded(name)
+        if len(whole) <= capacity:
+            return whole
+        suffix = PurePosixPath(name).suffix
+        if len(encoded(suffix)) > capacity // 2:
+            suffix = ""
+        stem = name[: len(name) - len(suffix)]
+        lo, hi = 0, len(stem)  # the longest stem[:k] + suffix that fits
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            if len(encoded(stem[:mid] + suffix)) <= capacity:
+                lo = mid
+            else:
+                hi = mid - 1
+        short = stem[:lo] + suffix
+        log.warning(
+            "the file name %r does not fit in one F packet (%d bytes here); it is sent as %r "
+            "-- a longer --packet-length keeps whole names",
+            name,
+            capacity,
+            short,
+        )
+        return encoded(short)
 
     def _attributes(self) -> bytes:
         """A packet: ``"`` type = binary 8-bit, ``1`` = length in bytes when known."""

@@ -417,12 +417,6 @@ def test_sender_without_receiver_gives_up_after_its_retries(sender_alone: Outcom
     assert stats["packets_received"] == 0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: the failure is printed twice -- once bare by the 'transfer failed' "
-    "warning of serialsocket._kermit_io (Python's last-resort log handler, as no "
-    "handler is configured without -v) and once by the CLI",
-)
 def test_failure_is_reported_once(sender_alone: Outcome) -> None:
     assert sender_alone.stderr.count("too many retries") == 1, sender_alone.stderr
 
@@ -484,27 +478,32 @@ def _long_name_transfer(tmp_path: pathlib.Path, *options: str) -> tuple[str, Out
     return name, sent, received
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: KermitSender cuts the *encoded* file name at the packet capacity "
-    "(_kermit_sender.py: name[:capacity]), which can split an 8th-bit prefix pair: "
-    "the receiver rejects the F packet (dangling prefix) and the transfer fails",
-)
+def _assert_shortened_whole(tmp_path: pathlib.Path, sent: Outcome, received: Outcome) -> None:
+    """Cut by whole characters, keeping the extension, with a warning that says so."""
+    assert sent.returncode == received.returncode == 0, (sent.stderr, received.stderr)
+    (stored,) = (tmp_path / "out").iterdir()
+    assert stored.read_bytes() == b"hello"
+    assert "\ufffd" not in stored.name, stored.name
+    assert stored.name.startswith("x\u00e9")
+    assert stored.name.endswith(".txt")
+    assert "does not fit in one F packet" in sent.stderr
+    assert "--packet-length" in sent.stderr
+
+
 def test_long_name_on_a_seven_bit_line_is_not_cut_inside_a_prefix(
     tmp_path: pathlib.Path,
 ) -> None:
+    """Found by this file: the encoded name used to be cut at the packet
+    capacity, splitting an 8th-bit prefix pair (the receiver rejected the F
+    packet: dangling prefix)."""
     _, sent, received = _long_name_transfer(tmp_path, "--seven-bit")
     assert "dangling prefix" not in sent.stderr
     assert "ends inside a prefix sequence" not in received.stderr
+    _assert_shortened_whole(tmp_path, sent, received)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: the F packet's name is cut at a byte count, which can split a UTF-8 "
-    "character: the receiver stores the file under a name ending in U+FFFD",
-)
 def test_long_name_is_not_cut_inside_a_character(tmp_path: pathlib.Path) -> None:
+    """Found by this file: a cut at a byte count split a UTF-8 character and
+    the file was stored under a name ending in U+FFFD."""
     _, sent, received = _long_name_transfer(tmp_path)
-    assert sent.returncode == received.returncode == 0
-    (stored,) = (tmp_path / "out").iterdir()
-    assert "\ufffd" not in stored.name, stored.name
+    _assert_shortened_whole(tmp_path, sent, received)
