@@ -1,9 +1,11 @@
 """Embed the telelink client in ordinary (blocking, threaded) controller code.
 
 ``tcpstream.BlockingClient`` runs the async client in a background thread;
-every call waits at most ``timeout`` seconds.  To run as written, this
-program first starts ``linksim arm-server`` (the simulated arm) as a separate
-process on a free loopback port, with a pre-shared key in a private file.
+every call waits at most ``timeout`` seconds, and the ``watchdog`` ends the
+session (the arm halts) if this program stops calling for that long.  To run
+as written, this program first starts ``linksim arm-server`` (the simulated
+arm) as a separate process on a free loopback port, with a pre-shared key in
+a private file.
 
     python examples/blocking_controller.py
 """
@@ -53,7 +55,13 @@ def main() -> None:
             f.write(key.hex())  # the key file holds the key as hex digits
         proc, port = start_arm_server(key_file)
         try:
-            with tcpstream.BlockingClient.tcp("127.0.0.1", port, key=key, timeout=30) as arm:
+            # watchdog: if this thread hangs for 10 s between calls (a deadlock, a
+            # stuck sensor read), the client drops the session and the arm halts.
+            # The arm's deadman cannot see such a hang: the client's own thread
+            # keeps sending heartbeats.
+            with tcpstream.BlockingClient.tcp(
+                "127.0.0.1", port, key=key, timeout=30, watchdog=10
+            ) as arm:
                 print("joints:", [round(math.degrees(q), 1) for q in arm.status().feedback.joints])
                 arm.move_joint(2, math.radians(-10))
                 result = arm.transform_to_pose(arm.status().feedback.joints)
