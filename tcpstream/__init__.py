@@ -19,7 +19,7 @@ and the session are specified byte by byte in ``tcpstream/PROTOCOL.md``.
 
 from . import _builders as commands
 from ._api import DEFAULT_PORT, connect_stream, connect_tcp, serve_stream, serve_tcp
-from ._blocking import BlockingClient
+from ._blocking import BlockingClient, WatchdogExpired
 from ._client import ArmClient, ClientStatistics, CommandHandle
 from ._client_connection import ClientConnection
 from ._commands import (
@@ -154,6 +154,7 @@ __all__ = [
     "Trigger",
     "UnknownCommand",
     "UnknownKind",
+    "WatchdogExpired",
     "WrongSize",
     "commands",
     "connect_stream",

@@ -266,6 +266,7 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "Trigger",
             "UnknownCommand",
             "UnknownKind",
+            "WatchdogExpired",
             "WrongSize",
             "commands",
             "connect_stream",

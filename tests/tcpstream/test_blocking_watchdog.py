@@ -27,9 +27,9 @@ from tcpstream import (
     ServerConfig,
     ServerStatistics,
     SessionClosed,
+    WatchdogExpired,
     commands,
 )
-from tcpstream._blocking import WatchdogExpired
 
 from .fakearm import FakeArm
 from .harness import KEY
