@@ -8,7 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PKGS   := serialsocket tcpstream linksim
 
-.PHONY: demo test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency clean
+.PHONY: demo test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,7 +61,7 @@ soak: $(STAMP)
 	$(PY) -m linksim._soak --hours $(SOAK_HOURS)
 
 # Benchmarks measure speed; they are not tests.  `make bench` runs the quick ones.
-bench: bench-codec bench-pty bench-latency
+bench: bench-codec bench-pty bench-latency bench-flood
 	$(PY) -m linksim bench goodput --quick
 
 bench-codec: $(STAMP)
@@ -76,6 +76,9 @@ bench-pty: $(STAMP)
 
 bench-latency: $(STAMP)
 	$(PY) -m linksim bench latency
+
+bench-flood: $(STAMP)
+	$(PY) -m linksim bench flood
 
 clean:
 	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache .hypothesis

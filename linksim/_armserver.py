@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import pathlib
 import sys
 from typing import Any
@@ -114,6 +115,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--max-len", type=int, help="serial packet length limit")
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
     ap.add_argument("--key-file", help="file holding the pre-shared key (>= 16 bytes)")
+    ap.add_argument(
+        "--max-packet-rate",
+        type=float,
+        default=200.0,
+        help="packets a second each connection may send before its reads are slowed "
+        "(default 200; 0: no limit)",
+    )
     ap.add_argument("--sessions", type=int, help="exit after this many sessions")
     ap.add_argument("-v", "--verbose", action="store_true", help="log sessions to stderr")
 
@@ -128,11 +136,13 @@ def _read_key(path: str) -> bytes:
         raise ValueError(f"{path}: the key file must hold the key as hex digits") from None
 
 
-def server_config_for(link: LinkConfig, key: bytes | None) -> ServerConfig:
+def server_config_for(
+    link: LinkConfig, key: bytes | None, *, max_packet_rate: float | None = 200.0
+) -> ServerConfig:
     """Server timing derived from the line (see :func:`linksim._demo.rtt_hint_for`)."""
     from ._demo import rtt_hint_for
 
-    return ServerConfig(key=key, rtt_hint=rtt_hint_for(link))
+    return ServerConfig(key=key, rtt_hint=rtt_hint_for(link), max_packet_rate=max_packet_rate)
 
 
 def arm_server_main(args: argparse.Namespace) -> int:
@@ -140,12 +150,22 @@ def arm_server_main(args: argparse.Namespace) -> int:
     from ._config import DirectionConfig
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
+    rate_limit = args.max_packet_rate
+    if not (math.isfinite(rate_limit) and rate_limit >= 0):
+        print(
+            "linksim arm-server: --max-packet-rate must be a number of packets a second "
+            f">= 0 (0: no limit), got {rate_limit}",
+            file=sys.stderr,
+        )
+        return 2
     try:
         world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
         key = _read_key(args.key_file) if args.key_file else None
         rate = args.rate or (args.baud if args.transport == "serial" else None)
         link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay))
-        server_cfg = server_config_for(link, key)
+        server_cfg = server_config_for(
+            link, key, max_packet_rate=rate_limit if rate_limit > 0 else None
+        )
         overrides: dict[str, Any] = {}
         if args.window is not None:
             overrides["window"] = args.window

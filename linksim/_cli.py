@@ -17,6 +17,7 @@ import trio
 from . import (
     _armserver,
     _bench_codec,
+    _bench_flood,
     _bench_goodput,
     _bench_kermit,
     _bench_latency,
@@ -244,6 +245,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _bench_latency.add_arguments(latency)
     latency.set_defaults(func=_bench_latency.main)
+    flood = bench_sub.add_parser(
+        "flood", help="server CPU under a flooding controller, with and without the rate limit"
+    )
+    _bench_flood.add_arguments(flood)
+    flood.set_defaults(func=_bench_flood.main)
     demo = sub.add_parser(
         "demo", help="a controller commands the simulated arm through the whole stack"
     )

@@ -60,14 +60,15 @@ class ServerConfig:
     max_connections: int = 8
     """Simultaneous connections (one controller, the rest observers or waiting);
     each costs three tasks and a few kB."""
-    max_packet_rate: float | None = 500.0
+    max_packet_rate: float | None = 200.0
     """Packets per second each connection may send, sustained; None: no limit.
     Past it the server reads that connection more slowly -- nothing is dropped;
     the transport's flow control pushes back on the sender -- so a flooding peer
-    costs the arm at most this many packets' work a second (about 0.1 ms each)
-    and ``max_connections`` times that in all.  An honest controller needs far
-    less: 4 heartbeats a second, and commands the 125 Hz arm takes one by one.
-    Benchmarks that ping-pong as fast as the host allows set None."""
+    costs the arm at most this many packets' work a second (``linksim bench
+    flood``: about 6 % of a core at 200) and ``max_connections`` times that in
+    all.  An honest controller needs far less: 4 heartbeats a second, a few
+    STATUS polls, and commands the 125 Hz arm takes one by one.  Benchmarks
+    that ping-pong as fast as the host allows set None."""
     packet_burst: int | None = None
     """Packets a connection may send at once above the rate, e.g. a full queue
     re-sent after a reconnect.  None: ``max(64, 2 * (queue_size + 1))``."""
