@@ -540,7 +540,9 @@ class LinkDirection:
         # Idle stretches far longer than a good-bad cycle are crossed in one
         # exact step (below) instead of by drawing every sojourn in them.
         far = int(64 * (1.0 / burst.p_good_to_bad + 1.0 / burst.p_bad_to_good))
-        gaps = np.flatnonzero(np.diff(slots, prepend=prev) > far)
+        # Idle slots before each byte (``prev`` is the first slot not yet walked).
+        idle = np.diff(slots, prepend=prev - 1) - 1
+        gaps = np.flatnonzero(idle > far)
         states = np.empty(n, dtype=np.bool_)
         pos, start = prev, 0
         for stop in [*gaps.tolist(), n]:

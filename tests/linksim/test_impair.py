@@ -329,3 +329,26 @@ def test_statistics_account_for_every_byte() -> None:
     assert s.bytes_delivered == len(half)
     assert s.bytes_delivered + s.bytes_in_flight == len(data) - s.bytes_dropped + s.bytes_inserted
     assert s.bytes_corrupted == s.corrupted_random > 0
+
+
+@pytest.mark.parametrize("offset", [-1, 0, 1])
+def test_gilbert_elliott_jump_threshold_is_the_same_inside_and_across_calls(offset: int) -> None:
+    """An idle gap right at the jump threshold is crossed the same way whether it
+    falls between two calls or inside one (white-box: held-back bytes are the
+    only way a gap lands inside one call through the public API)."""
+    burst = GilbertElliott(0.1, 0.4, error_good=0.0, error_bad=1.0)
+    config = DirectionConfig(rate=9600, burst=burst)
+    far = int(64 * (1 / 0.1 + 1 / 0.4))
+    first = np.arange(1, 51)
+    second = 50 + far + offset + np.arange(1, 51)
+    deps = np.concatenate([first, second, second[-1] + 5 + np.arange(1, 2001)]) * config.char_time
+
+    def states(cut: int) -> tuple[np.ndarray, int]:
+        d = LinkDirection(config, seed=5)
+        got = np.concatenate([d._burst_states(deps[:cut]), d._burst_states(deps[cut:])])
+        return got, d.statistics().bursts
+
+    across, bursts_across = states(50)  # the gap between the calls
+    inside, bursts_inside = states(100)  # the gap inside the first call
+    assert (across == inside).all()
+    assert bursts_across == bursts_inside
