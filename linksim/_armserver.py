@@ -120,7 +120,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         type=float,
         default=200.0,
         help="packets a second each connection may send before its reads are slowed "
-        "(default 200; 0: no limit)",
+        "(default 200; at least 16 at the default heartbeat; 0: no limit)",
     )
     ap.add_argument("--sessions", type=int, help="exit after this many sessions")
     ap.add_argument("-v", "--verbose", action="store_true", help="log sessions to stderr")

@@ -10,10 +10,13 @@ from dataclasses import dataclass, field
 from ._auth import MIN_KEY_SIZE
 from ._memory import DEFAULT_IDENTITIES, DEFAULT_MEMORY_SIZE
 
-__all__ = ["DEADMAN_FLOOR", "HEARTBEAT_FLOOR", "ServerConfig"]
+__all__ = ["DEADMAN_FLOOR", "HEARTBEAT_FLOOR", "MIN_PACKET_RATE", "ServerConfig"]
 
 HEARTBEAT_FLOOR = 0.25
 """Seconds: heartbeats more often than 4/s buy nothing on any link we serve."""
+MIN_PACKET_RATE = 10.0
+"""Packets/s: the lowest per-connection rate limit accepted (see
+:meth:`ServerConfig.packet_rate_floor`)."""
 DEADMAN_FLOOR = 1.0
 """Seconds: the shortest deadman the arm accepts by default.  Shorter trips on
 ordinary scheduling hiccups of a busy controller host."""
@@ -100,6 +103,13 @@ class ServerConfig:
                 f"dead_time {dead:g} s must exceed the round trip plus a heartbeat interval "
                 f"({self.rtt_hint + hb:g} s), or a healthy link would trip the deadman"
             )
+        floor = self.packet_rate_floor()
+        if self.max_packet_rate is not None and self.max_packet_rate < floor:
+            raise ValueError(
+                f"max_packet_rate {self.max_packet_rate:g}/s is below {floor:g}/s: an honest "
+                "controller's heartbeats and polls would fall behind for good (and a deadman "
+                "trip on a healthy link would follow); raise it, or turn the limit off"
+            )
 
     def timing(self) -> tuple[float, float]:
         """``(heartbeat_interval, dead_time)`` with the defaults applied."""
@@ -110,6 +120,12 @@ class ServerConfig:
         if dead is None:
             dead = max(DEADMAN_FLOOR, 2 * self.rtt_hint + 4 * hb)
         return hb, dead
+
+    def packet_rate_floor(self) -> float:
+        """The lowest ``max_packet_rate`` accepted: ``max(MIN_PACKET_RATE, 4 /
+        heartbeat_interval)``, four times what an idle controller sends, so a
+        throttled honest connection never builds a lasting backlog."""
+        return max(MIN_PACKET_RATE, 4.0 / self.timing()[0])
 
     def burst(self) -> int:
         """``packet_burst`` with the default applied."""

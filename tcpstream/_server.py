@@ -89,6 +89,9 @@ class ServerStatistics:
     """Times a connection's reads were paused because it sent faster than
     ``ServerConfig.max_packet_rate`` (a flood, or a controller bursting past
     ``packet_burst``); its bytes waited, none were dropped."""
+    throttled_seconds: float
+    """Seconds those pauses added up to, over all connections: under a sustained
+    flood it grows about as fast as the clock, once per flooding connection."""
 
 
 @dataclass(slots=True)
@@ -165,6 +168,7 @@ class Server:
         self._terminating = False
         self._lease_wake = trio.Event()
         self._nursery: trio.Nursery | None = None
+        self._throttled_for = 0.0  # closed connections' pauses (s)
         self._stats = dict.fromkeys(
             (
                 "connections_total",
@@ -229,6 +233,8 @@ class Server:
                     + sum(link.pump.throttles for link in self._links)
                 }
             ),
+            throttled_seconds=self._throttled_for
+            + sum(link.pump.throttled_for for link in self._links),
         )
 
     # --- serving --------------------------------------------------------------
@@ -251,6 +257,7 @@ class Server:
         finally:
             self._links.discard(link)
             self._stats["throttled"] += link.pump.throttles
+            self._throttled_for += link.pump.throttled_for
             if not link.conn.closed:  # cancelled from outside: the session is over
                 link.conn.close(CloseReason.SHUTDOWN, trio.current_time())
                 link.pump.drain_events()

@@ -296,7 +296,11 @@ def test_a_packet_flood_is_slowed_to_the_rate_limit_and_nothing_is_lost() -> Non
             for elapsed, answered in progress:
                 assert answered + 2 <= burst + rate * elapsed + 1, (elapsed, answered)
             assert progress[-1][0] >= (count + 2 - burst) / rate  # it really was slowed
-            assert server.statistics().throttled > 0
+            stats = server.statistics()
+            assert stats.throttled > 0
+            # The flood took (count + 2 - burst) / rate seconds more than the burst
+            # allowed, and almost all of it was spent in those pauses.
+            assert stats.throttled_seconds == pytest.approx((count + 2 - burst) / rate, rel=0.05)
             assert len(observer_granted) == 1
             assert observer_granted[0] < 1.0  # virtual seconds: not queued behind the flood
 

@@ -8,6 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from tcpstream import ServerConfig
+from tcpstream._config import MIN_PACKET_RATE
 from tcpstream._ratelimit import TokenBucket
 
 
@@ -68,3 +70,22 @@ def test_what_is_spent_never_exceeds_burst_plus_rate_times_time(
         b.spend(take, now)
         spent += take
         assert spent <= burst + rate * now + 1e-9
+
+
+@pytest.mark.parametrize("rate", [0.0, -5.0, math.nan, math.inf, 3.0, 15.9])
+def test_server_config_refuses_a_rate_limit_an_honest_controller_cannot_live_with(
+    rate: float,
+) -> None:
+    """Below four times an idle controller's heartbeat rate (16/s at the default
+    0.25 s heartbeat) a throttled honest connection would fall behind for good."""
+    with pytest.raises(ValueError, match="max_packet_rate"):
+        ServerConfig(max_packet_rate=rate)
+
+
+def test_server_config_rate_floor_follows_the_heartbeat() -> None:
+    assert ServerConfig().packet_rate_floor() == 16.0
+    slow = ServerConfig(rtt_hint=6.0)  # Earth-Moon serial: 3 s heartbeats
+    assert slow.packet_rate_floor() == MIN_PACKET_RATE
+    assert ServerConfig(rtt_hint=6.0, max_packet_rate=MIN_PACKET_RATE).max_packet_rate == 10.0
+    assert ServerConfig(max_packet_rate=None).burst() == 66
+    assert ServerConfig(queue_size=40).burst() == 82
