@@ -7,6 +7,7 @@ are in :mod:`serialsocket._kermit`; this module is the sending role.
 from __future__ import annotations
 
 import logging
+import zlib
 from collections import deque
 from collections.abc import Sequence
 from pathlib import PurePosixPath
@@ -168,8 +169,10 @@ class KermitSender(KermitSide):
 
         Shortened by whole characters, before encoding -- cutting the encoded
         bytes could split a prefix pair (a malformed packet the receiver
-        rejects) or a UTF-8 sequence -- and keeping a short extension, so the
-        receiver still knows what the file is.
+        rejects) or a UTF-8 sequence -- to ``<start of the stem>-<tag><extension>``:
+        the tag (4 hex digits of a CRC of the whole name) keeps two long names
+        with the same start from landing on the same file at the receiver, and
+        a short extension is kept so the receiver still knows what the file is.
         """
         assert self._neg is not None
         encoding = self._neg.send_encoding
@@ -180,18 +183,19 @@ class KermitSender(KermitSide):
         whole = encoded(name)
         if len(whole) <= capacity:
             return whole
+        tag = f"-{zlib.crc32(name.encode('utf-8', 'replace')) & 0xFFFF:04x}"
         suffix = PurePosixPath(name).suffix
-        if len(encoded(suffix)) > capacity // 2:
+        if len(encoded(tag + suffix)) > capacity // 2:
             suffix = ""
         stem = name[: len(name) - len(suffix)]
-        lo, hi = 0, len(stem)  # the longest stem[:k] + suffix that fits
+        lo, hi = 0, len(stem)  # the longest stem[:k] + tag + suffix that fits
         while lo < hi:
             mid = (lo + hi + 1) // 2
-            if len(encoded(stem[:mid] + suffix)) <= capacity:
+            if len(encoded(stem[:mid] + tag + suffix)) <= capacity:
                 lo = mid
             else:
                 hi = mid - 1
-        short = stem[:lo] + suffix
+        short = stem[:lo] + tag + suffix
         log.warning(
             "the file name %r does not fit in one F packet (%d bytes here); it is sent as %r "
             "-- a longer --packet-length keeps whole names",
@@ -199,7 +203,7 @@ class KermitSender(KermitSide):
             capacity,
             short,
         )
-        return encoded(short)
+        return encoded(short)[:capacity]  # only a capacity under 5 bytes can cut the tag
 
     def _attributes(self) -> bytes:
         """A packet: ``"`` type = binary 8-bit, ``1`` = length in bytes when known."""

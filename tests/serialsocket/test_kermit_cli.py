@@ -464,29 +464,41 @@ def test_unopenable_port_exits_2() -> None:
     assert b"Traceback" not in got.stderr
 
 
-def _long_name_transfer(tmp_path: pathlib.Path, *options: str) -> tuple[str, Outcome, Outcome]:
-    """Send one file whose UTF-8 name (x, 100 x é, .txt) cannot fit one normal F packet."""
-    name = "x" + "\u00e9" * 100 + ".txt"
+LONG_NAMES = {
+    "x" + "\u00e9" * 100 + "-first.txt": b"hello",
+    "x" + "\u00e9" * 100 + "-second.txt": b"world",
+}
+"""Two UTF-8 names that cannot fit one normal F packet and start the same."""
+
+
+def _long_name_transfer(tmp_path: pathlib.Path, *options: str) -> tuple[Outcome, Outcome]:
     (tmp_path / "src").mkdir()
-    (tmp_path / "src" / name).write_bytes(b"hello")
+    for name, content in LONG_NAMES.items():
+        (tmp_path / "src" / name).write_bytes(content)
     out = tmp_path / "out"
     out.mkdir()
     with relay() as line:
-        sent, received = transfer(
-            line.a, line.b, [tmp_path / "src" / name], out, ["--packet-length", "94", *options]
+        return transfer(
+            line.a,
+            line.b,
+            [tmp_path / "src" / name for name in LONG_NAMES],
+            out,
+            ["--packet-length", "94", *options],
         )
-    return name, sent, received
 
 
 def _assert_shortened_whole(tmp_path: pathlib.Path, sent: Outcome, received: Outcome) -> None:
-    """Cut by whole characters, keeping the extension, with a warning that says so."""
+    """Cut by whole characters, keeping the extension, tagged so that two names
+    with the same start stay two files, with a warning that says so."""
     assert sent.returncode == received.returncode == 0, (sent.stderr, received.stderr)
-    (stored,) = (tmp_path / "out").iterdir()
-    assert stored.read_bytes() == b"hello"
-    assert "\ufffd" not in stored.name, stored.name
-    assert stored.name.startswith("x\u00e9")
-    assert stored.name.endswith(".txt")
-    assert "does not fit in one F packet" in sent.stderr
+    stored = sorted((tmp_path / "out").iterdir(), key=lambda p: p.read_bytes())
+    assert [p.read_bytes() for p in stored] == [b"hello", b"world"]  # none overwritten
+    for path in stored:
+        assert "\ufffd" not in path.name, path.name
+        assert path.name.startswith("x\u00e9")
+        assert path.name.endswith(".txt")
+    assert stored[0].name != stored[1].name
+    assert sent.stderr.count("does not fit in one F packet") == 2
     assert "--packet-length" in sent.stderr
 
 
@@ -496,7 +508,7 @@ def test_long_name_on_a_seven_bit_line_is_not_cut_inside_a_prefix(
     """Found by this file: the encoded name used to be cut at the packet
     capacity, splitting an 8th-bit prefix pair (the receiver rejected the F
     packet: dangling prefix)."""
-    _, sent, received = _long_name_transfer(tmp_path, "--seven-bit")
+    sent, received = _long_name_transfer(tmp_path, "--seven-bit")
     assert "dangling prefix" not in sent.stderr
     assert "ends inside a prefix sequence" not in received.stderr
     _assert_shortened_whole(tmp_path, sent, received)
@@ -505,5 +517,5 @@ def test_long_name_on_a_seven_bit_line_is_not_cut_inside_a_prefix(
 def test_long_name_is_not_cut_inside_a_character(tmp_path: pathlib.Path) -> None:
     """Found by this file: a cut at a byte count split a UTF-8 character and
     the file was stored under a name ending in U+FFFD."""
-    _, sent, received = _long_name_transfer(tmp_path)
+    sent, received = _long_name_transfer(tmp_path)
     _assert_shortened_whole(tmp_path, sent, received)
