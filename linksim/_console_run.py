@@ -101,17 +101,7 @@ def _window_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
 
 def _session_figures(client: ArmClient) -> dict[str, Any]:
     """A command session's own figures (all a TCP link has): in flight, packets, bytes."""
-    stats = client.statistics()
-    out: dict[str, Any] = {
-        "pending": stats.pending,
-        "reconnects": stats.reconnects,
-        "bytes_sent": stats.bytes_sent,
-        "bytes_received": stats.bytes_received,
-    }
-    if stats.connection is not None:
-        out["packets_sent"] = stats.connection.packets_out
-        out["packets_received"] = stats.connection.packets_in
-    return out
+    return {"pending": client.statistics().pending} | client_link_figures(client)
 
 
 async def _telemetry_loop(client: ArmClient, session: ConsoleSession) -> None:
@@ -221,7 +211,8 @@ async def _virtual_session(
                     nonce_source=rng.randbytes,
                 ) as client:
                     await _drive(client, session, options)
-                    figures.update(probe() | client_link_figures(client))
+                    # The line's own figures (serial: what crossed the wire) win.
+                    figures.update(client_link_figures(client) | probe())
             except (SessionError, trio.BrokenResourceError, OSError) as exc:
                 error = explain_failure(exc)
             nursery.cancel_scope.cancel()
@@ -289,7 +280,7 @@ async def _real_session(
         ) as client:
             session.link = lambda: _window_figures(sock)
             await _drive(client, session, options)
-            figures.update(_window_figures(sock) | client_link_figures(client))
+            figures.update(client_link_figures(client) | _window_figures(sock))
     finally:
         await sock.aclose()
 
