@@ -284,6 +284,11 @@ def main(args: argparse.Namespace) -> int:
         name = "TCP" if report["transport"] == "tcp" else "pty"
         print(f"  tcpstream STATUS : p50 {cmd['p50_us']:8.1f} us   p99 {cmd['p99_us']:8.1f} us")
         print(f"  raw {name} echo     : p50 {raw['p50_us']:8.1f} us   p99 {raw['p99_us']:8.1f} us")
+        if report["transport"] != "tcp":
+            # The targets (issue 6) are for loopback TCP; a serial socket adds
+            # Kermit encoding, CRCs and the ARQ's own ACKs by design.
+            print(f"  p50 ratio {report['p50_ratio']:.2f}x (the targets are for loopback TCP)")
+            continue
         ok10 = "yes" if report["target_p50_within_10x"] else "NO"
         ok2ms = "yes" if report["target_p99_under_2ms"] else "NO"
         print(
