@@ -43,6 +43,7 @@ from ._connection import MAX_BAD_IN_A_ROW, ConnectionStatistics
 from ._errors import (
     AuthenticationFailed,
     LocalProtocolError,
+    OutcomeUnknown,
     Refused,
     RemoteProtocolError,
     SessionClosed,
@@ -131,6 +132,7 @@ __all__ = [
     "IllegalTransition",
     "LocalProtocolError",
     "NonFiniteWord",
+    "OutcomeUnknown",
     "Packet",
     "PacketError",
     "PacketKind",

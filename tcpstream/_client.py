@@ -39,7 +39,13 @@ from ._commands import (
     validate_arguments,
 )
 from ._connection import ConnectionStatistics
-from ._errors import AuthenticationFailed, LocalProtocolError, Refused, SessionClosed
+from ._errors import (
+    AuthenticationFailed,
+    LocalProtocolError,
+    OutcomeUnknown,
+    Refused,
+    SessionClosed,
+)
 from ._events import (
     Accepted,
     CloseReason,
@@ -57,6 +63,7 @@ from ._events import (
     TelemetryReceived,
 )
 from ._pump import Pump
+from ._state import SessionState
 
 __all__ = ["ArmClient", "ClientStatistics", "CommandHandle", "StreamFactory"]
 
@@ -205,6 +212,9 @@ class ArmClient:
         self._conn: ClientConnection | None = None
         self._ready = trio.Event()
         self._closed = trio.Event()
+        # Set (and replaced) whenever the session is granted, ends or the client
+        # closes: what submit() waits on while the link is being re-established.
+        self._changed = trio.Event()
         self._failure: Exception | None = None
         self._ending = False
         self._granted_now = False
@@ -222,6 +232,8 @@ class ArmClient:
         self.telemetry_dropped = 0
         self.rejected_by_arm = 0
         self._nursery: trio.Nursery | None = None
+        self._loop_scope: trio.CancelScope | None = None
+        self._stopping = False
 
     # --- lifetime -------------------------------------------------------------
 
@@ -238,9 +250,8 @@ class ArmClient:
                 raise self._failure or SessionClosed("the arm closed the connection")
         except BaseException:
             # Stop the background task, then raise the failure itself (Refused,
-            # AuthenticationFailed...), not wrapped in an exception group.
-            self._nursery.cancel_scope.cancel()
-            await self._nursery_cm.__aexit__(None, None, None)
+            # AuthenticationFailed, a cancellation...), not wrapped in a group.
+            await self._stop_tasks()
             raise
         return self
 
@@ -250,22 +261,45 @@ class ArmClient:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        if exc is None:
-            await self.aclose()
-        else:
-            # Tell the arm we are gone (it halts outstanding work at once rather
-            # than waiting out the deadman); bounded, and even when cancelled.
-            self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc!r}")
-            if self._pump is not None:
-                with trio.move_on_after(1.0) as scope:
-                    scope.shield = True
-                    await self._pump.wait_done()
+        try:
+            if exc is None:
+                await self.aclose()
+            else:
+                # Tell the arm we are gone (it halts outstanding work at once
+                # rather than waiting out the deadman).
+                self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc!r}")
+                await self._flush_goodbye()
+        except BaseException as inner:
+            # Cancelled (a deadline around the block) or failed while closing:
+            # the session still ends with a BYE, and the tasks still stop.
+            if not self._ending:
+                self._close_now(CloseReason.SHUTDOWN, f"controller stopped closing: {inner!r}")
+            await self._flush_goodbye()
+            raise
+        finally:
+            # Always leave the nursery entered in __aenter__, whatever happened
+            # above: a cancel scope left open corrupts trio's scope stack.
+            await self._stop_tasks()
+        return None
+
+    async def _flush_goodbye(self) -> None:
+        """Let the BYE go out: bounded, and even inside a cancelled scope."""
+        if self._pump is not None:
+            with trio.move_on_after(1.0) as scope:
+                scope.shield = True
+                await self._pump.wait_done()
+
+    async def _stop_tasks(self) -> None:
         assert self._nursery is not None
+        self._stopping = True
+        if self._loop_scope is not None:
+            self._loop_scope.cancel()
         self._nursery.cancel_scope.cancel()
-        # The background tasks end by this cancel; the caller's own exception (if
+        # The background tasks end promptly by this cancel (their own waits are
+        # bounded).  Always awaited, never skipped: a nursery left un-exited
+        # corrupts trio's cancel scope stack.  The caller's own exception (if
         # any) then propagates as itself, not wrapped in an exception group.
         await self._nursery_cm.__aexit__(None, None, None)
-        return None
 
     async def aclose(self, *, wait: bool = True) -> None:
         """Finish: wait for outstanding commands (``wait``), say BYE, close the stream."""
@@ -282,8 +316,23 @@ class ArmClient:
         # A method, not the attribute: it changes across awaits.
         return self._ending
 
+    def _notify(self) -> None:
+        self._changed.set()
+        self._changed = trio.Event()
+
+    def _usable(self) -> bool:
+        """A granted session is open right now: a command can be sent on it."""
+        conn = self._conn
+        return (
+            self._ready.is_set()
+            and not self._ending
+            and conn is not None
+            and conn.state is SessionState.OPEN
+        )
+
     def _close_now(self, reason: CloseReason, message: str) -> None:
         self._ending = True
+        self._notify()
         if self._pump is not None:
             self._pump.close(reason, message)
         self._fail_pending(SessionClosed("the client closed the session", reason))
@@ -291,6 +340,17 @@ class ArmClient:
     # --- the connection loop ----------------------------------------------------
 
     async def _connection_loop(self) -> None:
+        # Shielded from the caller's cancel scopes: a deadline around ``async
+        # with`` cancels the caller's waits, but the session must live on long
+        # enough to carry the BYE (__aexit__ waits for it, bounded).  Only
+        # _stop_tasks ends it.
+        with trio.CancelScope(shield=True) as scope:
+            self._loop_scope = scope
+            if self._stopping:
+                scope.cancel()
+            await self._connect_and_resume()
+
+    async def _connect_and_resume(self) -> None:
         granted_once = False
         try:
             stream = await self._factory()
@@ -332,6 +392,7 @@ class ArmClient:
                 stream = next_stream
         finally:
             self._closed.set()
+            self._notify()
             self._fail_pending(SessionClosed("the session ended and could not be resumed"))
             for ch in self._subscribers:
                 ch.close()
@@ -389,6 +450,11 @@ class ArmClient:
             else:
                 self._failure = Refused(event.reason, event.message)
         elif isinstance(event, SessionEnded):
+            # Not ready from this moment, not from when the pump has finished
+            # closing the stream (which can take a while): submit() must not
+            # use a CLOSED connection in between.
+            self._ready = trio.Event()
+            self._notify()
             ended.append(event)
             if event.reason is CloseReason.AUTHENTICATION and not event.by_peer:
                 self._failure = AuthenticationFailed(event.message)
@@ -408,8 +474,10 @@ class ArmClient:
         # than risk running one twice.  Otherwise re-send them all, oldest first,
         # under the same ids: the arm answers from memory, attaches to the one
         # running, or (above its highest id) runs what it never received.
-        forgot = event.last_request_id < self._confirmed_highest or (
-            self._arm_instance is not None and event.arm_instance != self._arm_instance
+        forgot = (
+            not event.remembered
+            or event.last_request_id < self._confirmed_highest
+            or (self._arm_instance is not None and event.arm_instance != self._arm_instance)
         )
         self._arm_instance = event.arm_instance
         if forgot:
@@ -419,12 +487,17 @@ class ArmClient:
             if not handle.sent:
                 continue
             if forgot:
-                unknown = "the arm restarted or forgot this controller; outcome unknown"
-                self._resolve(rid, None, SessionClosed(unknown))
+                unknown = (
+                    f"request {rid}: the arm restarted or forgot this controller, so it "
+                    "cannot say whether the command ran; outcome unknown (not re-sent). "
+                    "Check the arm's state before commanding again"
+                )
+                self._resolve(rid, None, OutcomeUnknown(unknown))
                 continue
             conn.send_command(rid, handle.command, now, failures_seen=handle.failures_seen)
         pump.kick()
         self._ready.set()
+        self._notify()
 
     def _resolve(
         self, request_id: int, result: CommandResult | None, error: Exception | None
@@ -464,11 +537,14 @@ class ArmClient:
         if command.code is not CommandCode.EMERGENCY_STOP:
             await self._slots.acquire()
         try:
-            while not self._ready.is_set():
-                if self._closed.is_set():
-                    raise SessionClosed("the session is closed")
-                with trio.move_on_after(1.0):
-                    await self._ready.wait()
+            # Bounded: the reconnect loop ends in a grant or in _closed.
+            while not self._usable():
+                if self._closed.is_set() or self._ending:
+                    raise SessionClosed(
+                        "the session is closed; nothing was sent (create a new client, "
+                        "or reconnect with this one's identity to resume)"
+                    )
+                await self._changed.wait()
             if self._next_id >= 2**32:
                 raise LocalProtocolError("request ids exhausted; create a new client")
         except BaseException:

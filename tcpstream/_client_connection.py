@@ -207,8 +207,10 @@ class ClientConnection(_Connection):
         self._move(Trigger.GRANT_IN)
         self.role = role
         self._params = params
-        (instance,) = struct.unpack_from("!Q", packet.body, _auth.PROOF_SIZE)
-        self._events.append(Granted(role, params, packet.request_id, instance))
+        instance, remembered = struct.unpack_from("!QB", packet.body, _auth.PROOF_SIZE)
+        self._events.append(
+            Granted(role, params, packet.request_id, instance, remembered=remembered == 1)
+        )
 
     def _on_reply(self, packet: Packet, now: float) -> None:
         self._move(Trigger.REPLY_IN)

@@ -19,6 +19,7 @@ from ._events import CloseReason, RefuseReason
 __all__ = [
     "AuthenticationFailed",
     "LocalProtocolError",
+    "OutcomeUnknown",
     "Refused",
     "RemoteProtocolError",
     "SessionClosed",
@@ -67,3 +68,15 @@ class SessionClosed(SessionError):
     def __init__(self, message: str, reason: CloseReason | None = None) -> None:
         super().__init__(message)
         self.reason = reason
+
+
+class OutcomeUnknown(SessionClosed):
+    """The command was sent, but whether it ran can no longer be known.
+
+    Raised for every command sent without a seen outcome when the session
+    resumes at an arm that restarted or no longer remembers this controller
+    (memory pressure: PROTOCOL.md 9), and for a command whose reply could not
+    be decoded.  The client does *not* re-send such a command: it may have run
+    already, and running it twice is worse than asking.  Check the arm's state
+    (``status()``, telemetry) before deciding what to command next.
+    """

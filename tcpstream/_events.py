@@ -162,13 +162,16 @@ class Granted(Event):
 
     ``arm_instance`` is a random number the arm's server picks when it starts:
     a different one on a reconnect means the arm restarted and its exactly-once
-    memory is gone.
+    memory is gone.  ``remembered`` is False when the arm has no memory of this
+    controller (never seen by this arm instance, or forgotten under memory
+    pressure): nothing sent before this grant can be resumed.
     """
 
     role: Role
     parameters: SessionParameters
     last_request_id: int
     arm_instance: int = 0
+    remembered: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,7 +43,15 @@ the client's in-flight window (32), so 1024 covers many reconnects' worth of
 lost replies; 1024 replies of ~250 bytes are ~250 kB per identity."""
 DEFAULT_IDENTITIES = 16
 """Controller identities remembered (least recently used forgotten first).  An
-arm has one controller at a time; 16 covers restarts and a few operators."""
+arm has one controller at a time; 16 covers restarts and a few operators.
+
+Memory pressure evicts; it never refuses.  Refusing a new identity would let
+anyone who can take control once per identity lock every later controller out
+of the arm, so instead the least recently used identity with nothing in flight
+is forgotten -- and the arm *says so*: the next GRANT to that identity carries
+"no memory of you" (:meth:`RequestMemory.admit` returns False), and its client
+settles every command it has not seen answered as outcome-unknown instead of
+re-sending it.  Evictions are counted (``forgotten``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,19 +99,41 @@ class RequestMemory:
         self.size = size
         self._identities = identities
         self._records: OrderedDict[ControllerIdentity, _Record] = OrderedDict()
+        self.forgotten = 0
+        """Identities evicted to make room for new ones (see DEFAULT_IDENTITIES)."""
 
     def _record(self, identity: ControllerIdentity) -> _Record:
         rec = self._records.get(identity)
         if rec is None:
             rec = self._records[identity] = _Record()
             # Forget the least recently used identity with nothing in flight.
+            # With work in flight in every record (at most queue + 1 of them can
+            # be), the memory holds one more than its bound until one finishes.
             if len(self._records) > self._identities:
                 for old, old_rec in self._records.items():
-                    if not old_rec.in_flight and old is not identity:
+                    if not old_rec.in_flight and old != identity:
                         del self._records[old]
+                        self.forgotten += 1
                         break
         self._records.move_to_end(identity)
         return rec
+
+    def admit(self, identity: ControllerIdentity) -> bool:
+        """A controller is granted: remember it from now on.
+
+        Returns whether the arm already remembered ``identity`` -- False for a
+        controller never seen by this memory, or one evicted since.  The GRANT
+        carries the answer: when it is False the arm cannot prove whether any
+        command the controller sent before ran, and the client must not re-send
+        one (PROTOCOL.md 9).
+        """
+        known = identity in self._records
+        self._record(identity)
+        return known
+
+    def remembers(self, identity: ControllerIdentity) -> bool:
+        """Whether ``identity`` is remembered (without touching its recency)."""
+        return identity in self._records
 
     def highest(self, identity: ControllerIdentity) -> int:
         """The highest request id taken in from ``identity`` (0 if none or forgotten)."""

@@ -77,6 +77,10 @@ class ServerStatistics:
     duplicates_answered: int
     """Re-sent request ids answered from memory or attached to the running one."""
     expired: int
+    identities_forgotten: int
+    """Controller identities the exactly-once memory evicted to make room
+    (``ServerConfig.memory_identities``); each is told "no memory of you" in its
+    next GRANT, and its unconfirmed commands end outcome-unknown, never re-run."""
     skipped: int
     """Commands not run because an earlier one failed first (the failure barrier)."""
     emergency_stops: int
@@ -233,6 +237,7 @@ class Server:
                     + sum(link.pump.throttles for link in self._links)
                 }
             ),
+            identities_forgotten=self.memory.forgotten,
             throttled_seconds=self._throttled_for
             + sum(link.pump.throttled_for for link in self._links),
         )
@@ -336,7 +341,13 @@ class Server:
                 old.pump.close(CloseReason.TAKEN_OVER, "the same controller connected again")
             self._lease_wake.set()
         link.identity, link.role = identity, role
-        link.conn.grant(role, self.memory.highest(identity), now)
+        # A controller is remembered from its grant on; an observer never
+        # commands, so it takes no place in the memory.
+        if role is Role.CONTROLLER:
+            remembered = self.memory.admit(identity)
+        else:
+            remembered = self.memory.remembers(identity)
+        link.conn.grant(role, self.memory.highest(identity), now, remembered=remembered)
         link.granted.set()
 
     def _refuse(self, link: _Link, reason: RefuseReason, message: str) -> None:

@@ -43,8 +43,9 @@ from ._state import SessionState, Side, Trigger
 __all__ = ["ServerConnection"]
 
 _ZERO_AUX_4 = (0.0, 0.0, 0.0, 0.0)
-_INSTANCE = struct.Struct("!Q")
-"""GRANT body bytes 32..39: the arm's instance number (after the 32-byte proof)."""
+_INSTANCE = struct.Struct("!QB")
+"""GRANT body bytes 32..39: the arm's instance number (after the 32-byte proof);
+byte 40: 1 if the arm remembers this controller, 0 if it has no memory of it."""
 
 
 class ServerConnection(_Connection):
@@ -85,8 +86,16 @@ class ServerConnection(_Connection):
         self._server_nonce = b""
         self._wanted = Role.CONTROLLER
 
-    def grant(self, role: Role, last_request_id: int, now: float) -> None:
-        """Grant ``role`` (GRANT carries the timing and, keyed, the arm's proof)."""
+    def grant(
+        self, role: Role, last_request_id: int, now: float, *, remembered: bool = False
+    ) -> None:
+        """Grant ``role`` (GRANT carries the timing and, keyed, the arm's proof).
+
+        ``remembered``: whether the arm's exactly-once memory knew this
+        controller before this grant.  Say False whenever it cannot be proved:
+        the controller then settles its unconfirmed commands as outcome-unknown
+        instead of re-sending them.
+        """
         self._move(Trigger.GRANT)
         self.role = role
         self._last_activity = now
@@ -102,7 +111,7 @@ class ServerConnection(_Connection):
                 self._incarnation,
                 self._wanted,
             )
-        body = (proof + _INSTANCE.pack(self._instance)).ljust(BODY_SIZE, b"\0")
+        body = (proof + _INSTANCE.pack(self._instance, int(remembered))).ljust(BODY_SIZE, b"\0")
         aux = (p.heartbeat_interval, p.dead_time, p.telemetry_period, float(p.memory_size))
         self._send(
             Packet(PacketKind.GRANT, flags=role, request_id=last_request_id, aux=aux, body=body),

@@ -242,6 +242,7 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "NonFiniteWord",
             "PACKET_SIZE",
             "PROTOCOL_VERSION",
+            "OutcomeUnknown",
             "Packet",
             "PacketError",
             "PacketKind",

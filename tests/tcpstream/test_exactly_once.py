@@ -1,0 +1,172 @@
+"""Exactly once under attack: forgotten identities, restarted arms, cuts at any moment.
+
+The arm remembers a bounded number of controller identities.  When it cannot
+prove whether a command ran -- it forgot the identity, or it restarted -- it
+says so in the GRANT, and the client settles every unconfirmed command with
+:class:`~tcpstream.OutcomeUnknown` instead of re-sending it (PROTOCOL.md 9).
+"""
+
+from __future__ import annotations
+
+import pytest
+import trio
+import trio.testing
+
+from tcpstream import (
+    ArmClient,
+    CommandCode,
+    OutcomeUnknown,
+    Server,
+    ServerConfig,
+    SessionClosed,
+    commands,
+)
+
+from .fakearm import FakeArm
+from .harness import run
+
+
+class _DeafWhen:
+    """A client-side stream that can stop hearing the arm (replies lost in the cut)."""
+
+    def __init__(self, stream: trio.abc.Stream) -> None:
+        self.inner = stream
+        self.deaf = False
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        while True:
+            data = await self.inner.receive_some(max_bytes)
+            if not self.deaf or not data:
+                return data
+
+    async def aclose(self) -> None:
+        await self.inner.aclose()
+
+
+def test_a_forgotten_identity_never_gets_its_command_run_twice() -> None:
+    """The review's scenario: request 1 runs, its replies are lost in a cut, 16
+    other identities push the controller out of the arm's memory; on reconnect
+    the command must be reported outcome-unknown, not re-sent and run again."""
+    arm = FakeArm(move_time=1.0)
+    config = ServerConfig(rtt_hint=0.2)  # dead time 1.4 s: the lease lapses quickly
+
+    async def main() -> None:
+        async with Server(arm, config) as server, trio.open_nursery() as nursery:
+            streams: list[_DeafWhen] = []
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(server.serve_stream, server_end)
+                wrapped = _DeafWhen(client_end)
+                streams.append(wrapped)
+                return wrapped  # type: ignore[return-value]
+
+            victim = ArmClient(factory, identity="victim", reconnect_delay=20.0)
+            async with victim:
+                streams[-1].deaf = True
+                handle = await victim.submit(commands.move_joint(1, 0.1))
+                await trio.sleep(3.0)  # ran at the arm; ACCEPTED/COMPLETED never heard
+                await trio.aclose_forcefully(streams[-1].inner)
+                await trio.sleep(2.0)  # the lease lapses (dead time 1.4 s)
+                for i in range(16):
+                    other = ArmClient(factory, identity=f"other-{i}", reconnect_attempts=0)
+                    async with other:
+                        await other.status()
+                # Before the fix: re-sent, run again, and reported plain COMPLETED.
+                with pytest.raises(OutcomeUnknown, match="outcome unknown"):
+                    await handle.completed()
+                assert victim.reconnects == 1
+                # The next command runs normally (a fresh memory for this identity).
+                await victim.move_joint(2, 0.1)
+            nursery.cancel_scope.cancel()
+
+    run(main)
+    moves = [c for c in arm.executed if c.code is CommandCode.MOVE_JOINT]
+    assert [(int(c.args[0]), c.args[1]) for c in moves] == [(1, 0.1), (2, 0.1)]
+
+
+class _SlowToClose(trio.abc.Stream):
+    """A client-side stream whose close takes a while, as TCP's and a serial
+    socket's do: the session is over before the pump has finished with it."""
+
+    def __init__(self, inner: trio.abc.Stream) -> None:
+        self.inner = inner
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await trio.sleep(0.002)
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        return await self.inner.receive_some(max_bytes)
+
+    async def aclose(self) -> None:
+        try:
+            await trio.sleep(0.3)
+        finally:
+            await trio.aclose_forcefully(self.inner)
+
+
+def test_submit_during_reconnects_waits_for_the_session_and_leaks_nothing() -> None:
+    """Finding 3: submit() racing a cut raised IllegalTransition (command not
+    allowed in state closed) and left its handle pending, so leaving the client
+    hung.  Now it waits for the resumed session, or raises SessionClosed."""
+    import random
+
+    arm = FakeArm(move_time=0.3)
+    config = ServerConfig(rtt_hint=0.2, dead_time=30.0)
+    rng = random.Random(17)
+
+    async def main() -> None:
+        async with Server(arm, config) as server, trio.open_nursery() as nursery:
+            cut_points: list[trio.abc.Stream] = []
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(server.serve_stream, server_end)
+                cut_points.append(server_end if len(cut_points) % 2 else client_end)
+                return _SlowToClose(client_end)
+
+            outcomes: dict[str, int] = {}
+            with trio.fail_after(3600):
+                async with ArmClient(
+                    factory, identity="racer", reconnect_attempts=50, reconnect_delay=0.05
+                ) as client:
+
+                    async def saboteur() -> None:
+                        for _ in range(30):
+                            await trio.sleep(rng.uniform(0.0, 1.0))
+                            await trio.aclose_forcefully(cut_points[-1])
+
+                    async def commander() -> None:
+                        for _ in range(60):
+                            await trio.sleep(rng.choice([0.0, 0.001, 0.01, 0.1]))
+                            try:
+                                handle = await client.submit(commands.move_joint(1, 0.001))
+                                await handle.completed()
+                                outcome = "completed"
+                            except OutcomeUnknown:
+                                outcome = "unknown"
+                            except SessionClosed:
+                                outcome = "closed"
+                            outcomes[outcome] = outcomes.get(outcome, 0) + 1
+
+                    async with trio.open_nursery() as inner:
+                        inner.start_soon(saboteur)
+                        inner.start_soon(commander)
+                    assert client.statistics().pending == 0
+            assert sum(outcomes.values()) == 60
+            # The arm never forgot the client: every command completed exactly once.
+            assert outcomes == {"completed": 60}
+            nursery.cancel_scope.cancel()
+
+    run(main)
+    assert len([c for c in arm.executed if c.code is CommandCode.MOVE_JOINT]) == 60
