@@ -33,6 +33,7 @@ from ._events import (
 from ._packet import (
     BODY_SIZE,
     Packet,
+    PacketError,
     PacketKind,
     unpack_text,
     words_body,
@@ -212,6 +213,23 @@ class ClientConnection(_Connection):
             Granted(role, params, packet.request_id, instance, remembered=remembered == 1)
         )
 
+    def _undecodable(self, exc: PacketError, raw: bytes, request_id: int, now: float) -> None:
+        # A COMPLETED or FAILED the codec rejects (a non-finite word, say) still
+        # answers its command: settle it now as failed, as for a COMPLETED whose
+        # feedback does not decode, rather than leave the caller to time out --
+        # and record it as a failure seen, so the arm's failure barrier and what
+        # this client was told stay in step.
+        super()._undecodable(exc, raw, request_id, now)
+        kind, code = raw[3], int.from_bytes(raw[6:8], "big")
+        if request_id and self._state is SessionState.OPEN and kind in _ANSWERS:
+            why = (
+                f"the arm's {PacketKind(kind).name} could not be decoded ({exc.message}); "
+                "outcome unknown: check the arm with STATUS"
+            )
+            self._events.append(
+                Failed(request_id, code, FailureReason.BAD_PACKET, why, (0.0, 0.0, 0.0, 0.0))
+            )
+
     def _on_reply(self, packet: Packet, now: float) -> None:
         self._move(Trigger.REPLY_IN)
         kind, rid = packet.kind, packet.request_id
@@ -253,3 +271,7 @@ class ClientConnection(_Connection):
                 self._events.append(Failed(rid, packet.code, FailureReason.BAD_PACKET, why, aux))
             return
         self._events.append(Completed(rid, code, CommandResult(feedback, aux)))
+
+
+_ANSWERS = frozenset({PacketKind.COMPLETED.value, PacketKind.FAILED.value})
+"""The kinds that settle a command."""

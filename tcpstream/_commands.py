@@ -36,6 +36,19 @@ MAX_PATH_POINTS = 5
 
 JOINTS = 6
 
+LENGTH_BOUND = 100.0
+"""Metres: the largest position, displacement, opening or box coordinate a
+command may carry.  Far outside any manipulator's workspace (the PUMA 560
+reaches under 1 m), and small enough that nothing the arm computes from it --
+a distance, a squared norm, a planner's error -- can overflow to infinity and
+leave the arm unable to say what went wrong."""
+ANGLE_BOUND = 4 * math.pi
+"""Radians: the largest joint angle, joint step or rotation step (two turns)."""
+FORCE_BOUND = 1.0e5
+"""Newtons: the largest grip force a SQUEEZE may ask for."""
+TIME_BOUND = 3600.0
+"""Seconds: the longest blend time a MOVE_PATH may ask for."""
+
 
 class CommandCode(enum.IntEnum):
     """Manipulator commands (u16 on the wire).
@@ -335,6 +348,10 @@ def validate_arguments(command: Command) -> None:
     for i, word in enumerate(args):
         if not math.isfinite(word):
             raise bad(i, f"{word!r} is not a finite number")
+    for first, last, bound, unit in _magnitudes(command):
+        for i in range(first, last):
+            if abs(args[i]) > bound:
+                raise bad(i, f"{args[i]:g} is out of range (|value| <= {bound:g} {unit})")
 
     if code is CommandCode.OPEN_FINGERS and args[0] < 0:
         raise bad(0, "finger opening must be >= 0 (0 opens fully)")
@@ -369,3 +386,36 @@ def validate_arguments(command: Command) -> None:
             dot = sum(x * y for x, y in zip(s, a, strict=True))
             if abs(dot) > 1e-3:
                 raise bad(6, f"S and A must be orthogonal (S.A = {dot:.4g})")
+
+
+def _magnitudes(command: Command) -> list[tuple[int, int, float, str]]:
+    """Word ranges ``[first, last)`` of ``command`` and the bound on their size.
+
+    Checked before anything else looks at the numbers, so that an argument far
+    outside the workspace is a BAD_ARGUMENT, never an overflow in the planner.
+    """
+    code, args = command.code, command.args
+    length, angle = (LENGTH_BOUND, "m"), (ANGLE_BOUND, "rad")
+    spans: list[tuple[int, int, tuple[float, str]]] = []
+    if code is CommandCode.OPEN_FINGERS:
+        spans.append((0, 1, length))
+    elif code is CommandCode.MOVE_TO_POSITION:
+        spans.append((0, 3, length))
+    elif code is CommandCode.MOVE_JOINTS:
+        spans.append((0, JOINTS, angle))
+    elif code is CommandCode.MOVE_JOINT:
+        spans.append((1, 2, angle))
+    elif code is CommandCode.TRANSFORM:
+        to_joints = CommandFlags.TO_JOINTS in command.flags
+        spans.append((0, 3, length) if to_joints else (0, JOINTS, angle))
+    elif code is CommandCode.SQUEEZE:
+        spans.append((0, 1, (FORCE_BOUND, "N")))
+    elif code is CommandCode.MOVE_CARTESIAN_DELTA:
+        spans += [(0, 3, length), (3, 6, angle)]
+    elif code is CommandCode.MOVE_PATH:
+        # The count itself is checked exactly later; bound what it spans.
+        n = int(args[0]) if 1 <= args[0] <= MAX_PATH_POINTS else MAX_PATH_POINTS
+        spans += [(1, 2, (TIME_BOUND, "s")), (2, 2 + 3 * n, length)]
+    elif code is CommandCode.ADD_OBSTACLE:
+        spans.append((0, 6, length))
+    return [(first, last, bound, unit) for first, last, (bound, unit) in spans]

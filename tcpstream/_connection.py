@@ -194,7 +194,8 @@ class _Connection(abc.ABC):
             except PacketError as exc:
                 # The magic was right, so the framing holds: skip exactly one packet.
                 del self._inbuf[:PACKET_SIZE]
-                self._reject(exc.reason, exc.message, exc.request_id, now)
+                rid = exc.request_id if self._tag_holds(raw) else 0
+                self._undecodable(exc, raw, rid, now)
                 continue
             del self._inbuf[:PACKET_SIZE]
             self._accept_packet(packet, raw, now)
@@ -315,6 +316,20 @@ class _Connection(abc.ABC):
             del self._inbuf[: len(self._inbuf) - keep]
         else:
             del self._inbuf[:at]
+
+    def _undecodable(self, exc: PacketError, raw: bytes, request_id: int, now: float) -> None:
+        """A packet with the right magic that does not decode: counted, one packet
+        skipped.  ``request_id`` is the packet's, if it may be believed, else 0."""
+        self._reject(exc.reason, exc.message, request_id, now)
+
+    def _tag_holds(self, raw: bytes) -> bool:
+        """Whether an undecodable packet's request id may be believed: always
+        without a key, and with one only if its tag verifies (the tag covers the
+        raw bytes, so it can be checked even when the words cannot be decoded)."""
+        if self._session_key is None:
+            return True
+        expected = _auth.packet_tag(self._session_key, self._recv_dir, raw[:SIGNED_SIZE])
+        return _auth.verify(expected, raw[SIGNED_SIZE:PACKET_SIZE])
 
     def _reject(self, reason: FailureReason, message: str, request_id: int, now: float) -> None:
         self._stats["bad_packets"] += 1

@@ -240,12 +240,20 @@ class Packet:
 def encode_packet(packet: Packet) -> bytes:
     """The packet's :data:`SIGNED_SIZE` signed bytes followed by its tag.
 
-    Raises ``ValueError`` for a field out of range (a local bug, not a peer's).
+    Raises ``ValueError`` for a field out of range or a word that is not finite
+    (a local bug, not a peer's: :func:`decode_packet` would reject the packet).
     """
     if len(packet.body) != BODY_SIZE or len(packet.tag) != TAG_SIZE:
         raise ValueError(f"body must be {BODY_SIZE} bytes and tag {TAG_SIZE}")
     if len(packet.aux) != AUX_WORDS:
         raise ValueError(f"aux must be {AUX_WORDS} words")
+    # The receiver's decode_packet rejects these; never put one on the wire.
+    if not all(math.isfinite(w) for w in packet.aux):
+        raise ValueError(f"aux words must be finite, got {packet.aux!r}")
+    if packet.kind in NUMERIC_KINDS and not all(
+        math.isfinite(w) for w in _WORDS.unpack(packet.body)
+    ):
+        raise ValueError(f"{packet.kind.name} body words must be finite")
     head = _HEADER.pack(
         MAGIC,
         PROTOCOL_VERSION,

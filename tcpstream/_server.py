@@ -394,6 +394,10 @@ class Server:
         link.pump.kick()
 
     def _finish(self, identity: ControllerIdentity, request_id: int, reply: StoredReply) -> None:
+        # Every final reply passes here before it is remembered or sent: the one
+        # place to make sure the arm never emits a packet its protocol forbids.
+        if not _all_finite(reply):
+            reply = self._non_finite(reply)
         self.memory.finish(identity, request_id, reply)
         if isinstance(reply, StoredFailure) and reply.reason in _BARRIER_REASONS:
             self.memory.raise_barrier(identity, request_id)
@@ -582,6 +586,24 @@ class Server:
         self._halt(reason)
         return _failure(command, reason, f"halted by {reason.name.lower().replace('_', ' ')}")
 
+    def _non_finite(self, reply: StoredReply) -> StoredFailure:
+        """A reply carrying inf or NaN: the controller's decoder would reject it
+        and the command would hang unanswered at the client.  Detail words of a
+        failure are clamped (the reason stands); a success reporting a
+        non-finite state is an arm fault: halt and say so."""
+        if isinstance(reply, StoredFailure):
+            log.warning("%s detail words %r are not finite; clamped", reply.reason.name, reply.aux)
+            a0, a1, a2, a3 = (_clamp(w) for w in reply.aux)
+            return StoredFailure(reply.code, reply.reason, reply.message, (a0, a1, a2, a3))
+        log.error("the executor reported a non-finite state after %s; halting", reply.code.name)
+        self._halt(FailureReason.ARM_FAULT)
+        return StoredFailure(
+            reply.code,
+            FailureReason.ARM_FAULT,
+            "the arm reported a non-finite value in its state; halted (arm fault)",
+            _ZERO4,
+        )
+
     # --- calling the executor: its bugs must not take the server down ---------------
 
     def _halt(self, reason: FailureReason) -> None:
@@ -642,6 +664,10 @@ class Server:
             except Exception:
                 log.exception("executor.state() failed; telemetry sample skipped")
                 continue
+            if not all(math.isfinite(w) for w in state.to_words()):
+                log.error("executor.state() is not finite; telemetry sample skipped")
+                self._stats["telemetry_skipped"] += 1
+                continue
             now = trio.current_time()
             for ln in listeners:
                 if ln.pump.idle:
@@ -668,6 +694,23 @@ _BARRIER_REASONS = frozenset(
 """Failures the arm decided on while executing (or the deadman imposed): they
 raise the barrier.  Not STOPPED (the controller asked for it), nor refusals of
 commands that never ran (QUEUE_FULL, TERMINATING, EXPIRED, SKIPPED itself)."""
+
+
+def _all_finite(reply: StoredReply) -> bool:
+    if isinstance(reply, StoredFailure):
+        return all(math.isfinite(w) for w in reply.aux)
+    words = (*reply.result.aux, *reply.result.feedback.to_words())
+    return all(math.isfinite(w) for w in words)
+
+
+def _clamp(word: float) -> float:
+    """A finite stand-in for a non-finite detail word: NaN is 0, +-inf the largest double."""
+    if math.isnan(word):
+        return 0.0
+    return max(-_LARGEST, min(_LARGEST, word))
+
+
+_LARGEST = 1.7976931348623157e308
 
 
 def _failure(command: Command, reason: FailureReason, message: str) -> StoredFailure:

@@ -307,12 +307,27 @@ BAD_ARGUMENT = FailureReason.BAD_ARGUMENT  # decodes, but validate_arguments ref
 def test_out_of_range_and_non_finite_arguments_fail_and_never_reach_the_arm(
     name: str, command: Command, reason: FailureReason
 ) -> None:
+    finite = all(math.isfinite(w) for w in command.args)
+
     async def main() -> None:
-        async with serving() as (_server, arm, opener):
-            peer, client, events = await _session(opener)
+        # Our own encoder refuses a non-finite word, so such a COMMAND is a
+        # hostile peer's: forged on an unkeyed session by patching the bytes.
+        config = CONFIG if finite else ServerConfig(rtt_hint=0.2, max_connections=3)
+        async with serving(config) as (_server, arm, opener):
+            peer, client, events = await _session(opener, key=KEY if finite else None)
             assert any(isinstance(e, Granted) for e in events)
-            client.send_command(5, command, trio.current_time())
-            replies = await _command_reply(peer, client)
+            if finite:
+                client.send_command(5, command, trio.current_time())
+                replies = await _command_reply(peer, client)
+            else:
+                placeholder = Command(command.code, [0.0] * len(command.args), command.flags)
+                client.send_command(5, placeholder, trio.current_time())
+                raw = bytearray(client.data_to_send())
+                raw[56 : 56 + 8 * len(command.args)] = struct.pack(
+                    f"!{len(command.args)}d", *command.args
+                )
+                await peer.send(bytes(raw))
+                replies = await _command_reply(peer, client)
             [failed] = [e for e in replies if isinstance(e, Failed)]
             assert failed.request_id == 5
             assert failed.reason is reason, failed

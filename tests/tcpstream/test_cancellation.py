@@ -82,7 +82,7 @@ def test_cancellation_injected_at_every_moment_of_open_use_and_close(
     running a command on its own with nobody connected for long."""
     arm = FakeArm(move_time=0.2)
     landed = 0
-    deadlines = [i * 0.001 for i in range(0, 320)]
+    deadlines = [i * 0.001 for i in range(320)]
 
     async def main() -> None:
         nonlocal landed
