@@ -510,8 +510,13 @@ class ArmClient:
             self._slots.release()
 
     def _fail_pending(self, error: SessionClosed) -> None:
+        """Settle every pending command: a command already sent may have run, so
+        it ends :class:`OutcomeUnknown`; one never sent ends with ``error``."""
         for rid in sorted(self._pending):
-            self._resolve(rid, None, error)
+            sent = self._pending[rid].sent
+            unknown = OutcomeUnknown(f"request {rid} was sent, but {error}: outcome unknown")
+            unknown.reason = error.reason
+            self._resolve(rid, None, unknown if sent else error)
 
     def _telemetry(self, feedback: Feedback) -> None:
         self.latest_telemetry = feedback
