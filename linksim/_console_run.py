@@ -36,6 +36,7 @@ from ._demo import (
 from ._pair import endpoint_config_for
 from ._preview import preview
 from ._telemetry_log import TelemetryLog
+from ._virtual import run_virtual
 from ._world import WorldConfig
 
 __all__ = ["ConsoleOptions", "ConsoleResult", "run_console"]
@@ -304,5 +305,5 @@ def run_console(options: ConsoleOptions) -> ConsoleResult:
             clock = trio.testing.MockClock(rate=options.rate)
         else:
             clock = trio.testing.MockClock(autojump_threshold=0)
-        return trio.run(_virtual, options, clock=clock)
+        return run_virtual(_virtual, options, clock=clock)
     return trio.run(_real, options)

@@ -39,6 +39,7 @@ from ._control import CommandState, TaskRun, feedback_record
 from ._pair import endpoint_config_for, serial_socket_pair
 from ._progress import Progress
 from ._tasks import rock_task
+from ._virtual import run_virtual
 from ._world import DEFAULT_WORLD, WorldConfig
 
 __all__ = ["DemoOptions", "DemoReport", "rtt_hint_for", "run_demo"]
@@ -297,7 +298,7 @@ def explain_failure(exc: BaseException) -> str:
 def run_demo(options: DemoOptions) -> DemoReport:
     """Run the demo to the end and return its report (never raises for a failed run)."""
     if options.virtual:
-        return trio.run(_run_virtual, options, clock=trio.testing.MockClock(autojump_threshold=0))
+        return run_virtual(_run_virtual, options)
     from ._demo_real import run_real
 
     started = time.monotonic()

@@ -62,6 +62,7 @@ from ._arm import SimulatedArm
 from ._config import LinkConfig, Outage
 from ._demo import rtt_hint_for
 from ._pair import endpoint_config_for, serial_socket_pair
+from ._virtual import run_virtual
 
 __all__ = ["OUTAGE_LENGTHS", "SoakReport", "check", "main", "run_soak"]
 
@@ -321,14 +322,7 @@ def run_soak(
     if not tracing:
         tracemalloc.start()
     try:
-        trio.run(
-            _soak,
-            report,
-            outage_every,
-            bulk,
-            progress,
-            clock=trio.testing.MockClock(autojump_threshold=0),
-        )
+        run_virtual(_soak, report, outage_every, bulk, progress)
     finally:
         if not tracing:
             tracemalloc.stop()
