@@ -207,3 +207,71 @@ def test_one_receiver_and_one_sender_at_a_time() -> None:
             await port.send_all(b"x")  # lets the first receiver finish
 
     run(main)
+
+
+def test_socket_url_reads_a_burst_in_a_few_hand_offs() -> None:
+    """pyserial's socket:// says in_waiting is 0 or 1; reading 1 + in_waiting
+    moved at most two bytes per hand-off to trio (20 KB: ~10 000 of them)."""
+    payload = bytes(range(256)) * 80  # 20 480 bytes
+
+    async def main() -> None:
+        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+        addr = listeners[0].socket.getsockname()
+        async with listeners[0] as listener:
+            port = await open_port(f"socket://{addr[0]}:{addr[1]}")
+            async with port:
+                peer = await listener.accept()
+                await peer.send_all(payload)
+                assert await read_exactly(port, len(payload)) == payload
+                # Each read returned one hand-off's worth (read_exactly asks
+                # for everything still missing, so reads == hand-offs).
+                assert port.statistics().reads <= 50, port.statistics()
+                await peer.aclose()
+
+    run(main)
+
+
+def test_open_port_refuses_bad_line_settings_at_once() -> None:
+    import serial
+
+    async def main() -> None:
+        for baud in (0, -9600, 9600.5, True):
+            with pytest.raises(ValueError, match="baud must be a positive integer"):
+                await open_port("loop://", baud)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="bytesize"):
+            await open_port("loop://", bytesize=9)
+        with pytest.raises(ValueError, match="parity"):
+            await open_port("loop://", parity="X")
+        with pytest.raises(ValueError, match="stopbits"):
+            await open_port("loop://", stopbits=3)
+        # An already-open pyserial port used to hang ("://" in a Serial iterates it).
+        ser = serial.serial_for_url("loop://")
+        try:
+            with trio.fail_after(1.0), pytest.raises(TypeError, match="path or a pyserial URL"):
+                await open_port(ser)  # type: ignore[arg-type]
+        finally:
+            ser.close()
+
+    run(main)
+
+
+def test_a_seven_bit_even_parity_line_opens_and_carries_printable_bytes() -> None:
+    async def main() -> None:
+        port = await open_port("loop://", 2400, bytesize=7, parity="E", stopbits=1)
+        async with port:
+            assert port.serial is not None
+            assert (port.serial.bytesize, port.serial.parity) == (7, "E")
+            await port.send_all(b"\x01# ~Kermit\r")
+            assert await read_exactly(port, 11) == b"\x01# ~Kermit\r"
+
+    run(main)
+
+
+def test_an_open_error_names_the_errno_once() -> None:
+    async def main() -> None:
+        with pytest.raises(OSError, match="No such file") as info:
+            await open_port("/dev/ttyNOPE-telelink")
+        assert str(info.value).count("Errno") == 1, str(info.value)
+        assert str(info.value).count("ttyNOPE") == 1, str(info.value)
+
+    run(main)
