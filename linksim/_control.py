@@ -206,10 +206,20 @@ class TaskRun:
             finally:
                 stop_done.set()
 
+        # Replies are applied to the records by one task, in request order:
+        # with one task per command, replies that arrive together were
+        # applied in whatever order trio woke the tasks ("#3 failed" before
+        # "#2 completed", accepted times out of order), and the console's
+        # predictor, fed in that order, flagged different divergences from
+        # run to run (issue 19).
+        sent: list[tuple[CommandRecord, CommandHandle]] = []
+        wake = _Wake()
+
         try:
             async with trio.open_nursery() as outer:
                 outer.start_soon(guard)
                 async with trio.open_nursery() as followers:
+                    followers.start_soon(self._apply_in_order, sent, wake, failed)
                     for record in self.records:
                         if failed.is_set():
                             break
@@ -217,9 +227,13 @@ class TaskRun:
                         record.state = CommandState.SENT
                         record.sent_at = trio.current_time()
                         self.on_change()
-                        followers.start_soon(self._follow, record, handle, failed)
-                        # Let a follower see an immediate rejection before the next submit.
+                        sent.append((record, handle))
+                        followers.start_soon(_notify_on_progress, handle, wake)
+                        # Let an immediate rejection be seen before the next submit.
                         await trio.lowlevel.checkpoint()
+                        wake.set()
+                    wake.closing = True
+                    wake.set()
                 if failed.is_set():
                     await stop_done.wait()
                 outer.cancel_scope.cancel()
@@ -234,28 +248,44 @@ class TaskRun:
             self.finished_at = now
             self.on_change()
 
-    async def _follow(
-        self, record: CommandRecord, handle: CommandHandle, failed: trio.Event
+    async def _apply_in_order(
+        self,
+        sent: list[tuple[CommandRecord, CommandHandle]],
+        wake: _Wake,
+        failed: trio.Event,
     ) -> None:
-        try:
-            await handle.accepted()
+        """Apply what the handles say to the records, oldest command first."""
+        while True:
+            await wake.wait()
+            now = trio.current_time()
+            for record, handle in sent:
+                if self._apply(record, handle, now):
+                    failed.set()
+            if wake.closing and all(record.state.final for record, _ in sent):
+                return
+
+    def _apply(self, record: CommandRecord, handle: CommandHandle, now: float) -> bool:
+        """Move ``record`` along as far as ``handle`` went; True if it just failed."""
+        if record.state is CommandState.SENT and handle.position is not None:
             record.state = CommandState.ACCEPTED
-            record.accepted_at = trio.current_time()
+            record.accepted_at = now
             self.on_change()
-            record.result = await handle.completed()
+        if record.state.final or not handle.done:
+            return False
+        record.done_at = now
+        error = handle.error
+        if error is None:
+            record.result = handle.result
             record.state = CommandState.COMPLETED
-        except CommandFailed as exc:
-            record.state = CommandState.FAILED
-            record.error = exc.message
-            record.reason = exc.reason.name
-            failed.set()
-        except SessionError as exc:
-            record.state = CommandState.FAILED
-            record.error = str(exc)
-            record.reason = type(exc).__name__
-            failed.set()
-        record.done_at = trio.current_time()
+            self.on_change()
+            return False
+        record.state = CommandState.FAILED
+        if isinstance(error, CommandFailed):
+            record.error, record.reason = error.message, error.reason.name
+        else:
+            record.error, record.reason = str(error), type(error).__name__
         self.on_change()
+        return True
 
     async def _stop(self, client: ArmClient) -> None:
         if all(r.state.final for r in self.records if r.sent_at is not None):
@@ -264,3 +294,29 @@ class TaskRun:
         # The stop's own reply may be a failure (nothing left to stop): that is fine.
         with contextlib.suppress(CommandFailed, SessionError):
             await client.emergency_stop()
+
+
+class _Wake:
+    """A level-triggered wake-up for the one task that applies replies."""
+
+    def __init__(self) -> None:
+        self._event = trio.Event()
+        self.closing = False
+        """Every command has been submitted: stop once all are final."""
+
+    def set(self) -> None:
+        self._event.set()
+
+    async def wait(self) -> None:
+        await self._event.wait()
+        self._event = trio.Event()
+
+
+async def _notify_on_progress(handle: CommandHandle, wake: _Wake) -> None:
+    """Wake the applier when ``handle`` is accepted and when it is settled."""
+    with contextlib.suppress(CommandFailed, SessionError):
+        await handle.accepted()
+    wake.set()
+    with contextlib.suppress(CommandFailed, SessionError):
+        await handle.completed()
+    wake.set()

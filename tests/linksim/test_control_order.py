@@ -1,0 +1,75 @@
+"""A task run applies the arm's replies in request order, whatever trio's
+scheduler does (issue 19: "#3 failed" printed before "#2 completed", accepted
+times out of order, the console's predictor fed in a different order each run)."""
+
+from __future__ import annotations
+
+import pytest
+import trio
+import trio.testing
+
+import linksim._virtual as virtual
+from linksim import TaskRun
+from tcpstream import (
+    ArmClient,
+    Command,
+    CommandCode,
+    CommandFailed,
+    CommandResult,
+    FailureReason,
+    Server,
+    commands,
+)
+from tests.tcpstream.fakearm import FakeArm
+
+
+class _FailsWeigh(FakeArm):
+    async def execute(self, command: Command) -> CommandResult:
+        if command.code is CommandCode.WEIGH:
+            self.executed.append(command)
+            raise CommandFailed(FailureReason.NO_OBJECT, "nothing grasped")
+        return await super().execute(command)
+
+
+SCRIPT = [
+    commands.move_joint(1, 0.1),  # #1 takes a second
+    commands.status(),  # #2 completes at once after it ...
+    commands.weigh(),  # #3 ... and #3 fails at once: same instant, same read
+    commands.status(),  # #4 is skipped (planned on #3 succeeding)
+]
+
+
+@pytest.mark.parametrize("scheduler_seed", range(8))
+def test_replies_that_arrive_together_are_applied_in_request_order(
+    monkeypatch: pytest.MonkeyPatch, scheduler_seed: int
+) -> None:
+    monkeypatch.setattr(virtual, "SCHEDULER_SEED", scheduler_seed)
+    events: list[tuple[int, str]] = []
+
+    async def main() -> None:
+        arm = _FailsWeigh(move_time=1.0)
+        async with Server(arm) as server, trio.open_nursery() as nursery:
+
+            async def factory() -> trio.abc.Stream:
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(server.serve_stream, server_end)
+                return client_end
+
+            seen: dict[int, str] = {}
+
+            def on_change() -> None:
+                for record in run.records:
+                    if seen.get(record.index) != record.state.value:
+                        seen[record.index] = record.state.value
+                        events.append((record.index, record.state.value))
+
+            run = TaskRun(SCRIPT, on_change=on_change)
+            async with ArmClient(factory) as client:
+                await run.run(client)
+            nursery.cancel_scope.cancel()
+
+    virtual.run_virtual(main)
+    done = [(i, s) for i, s in events if s in ("completed", "failed")]
+    assert done[:3] == [(1, "completed"), (2, "completed"), (3, "failed")], events
+    accepted = [i for i, s in events if s == "accepted"]
+    assert accepted == sorted(accepted), events
