@@ -164,9 +164,37 @@ def client_link_figures(client: ArmClient) -> dict[str, Any]:
     return out
 
 
-def add_goodput(figures: dict[str, Any], seconds: float) -> None:
-    moved = int(figures.get("bytes_sent", 0)) + int(figures.get("bytes_received", 0))
-    figures["goodput_Bps"] = round(moved / seconds, 1) if seconds > 0 else 0.0
+def line_capacity(link: LinkConfig) -> tuple[float | None, float | None]:
+    """Characters per second the line carries controller -> arm and back (None: unlimited)."""
+    return tuple(  # type: ignore[return-value]
+        d.rate / d.bits_per_char if d.rate is not None else None for d in (link.a_to_b, link.b_to_a)
+    )
+
+
+def add_rates(
+    figures: dict[str, Any],
+    seconds: float,
+    capacity: tuple[float | None, float | None] = (None, None),
+) -> None:
+    """Each direction's payload rate, and how busy the line was, with units in the names.
+
+    ``payload_*_Bps`` is one direction's application bytes (delivered and
+    acknowledged) over the whole run: the same meaning as ``goodput_Bps`` in
+    ``linksim bench goodput``, but over a run that also waits on the arm, so
+    it is no measure of the line's speed.  ``line_use_*`` is the fraction of
+    that direction's capacity (``capacity``, characters per second) the wire
+    bytes took -- data, retransmissions, ACKs, heartbeats, telemetry -- where
+    both are known.
+    """
+    if seconds <= 0:
+        return
+    for way, payload_key, wire_key, cps in (
+        ("sent", "bytes_sent", "wire_bytes_sent", capacity[0]),
+        ("received", "bytes_received", "wire_bytes_received", capacity[1]),
+    ):
+        figures[f"payload_{way}_Bps"] = round(int(figures.get(payload_key, 0)) / seconds, 1)
+        if cps is not None and wire_key in figures:
+            figures[f"line_use_{way}"] = round(int(figures[wire_key]) / (cps * seconds), 3)
 
 
 # --- the controller side (shared by the demo and `linksim control`) ------------------
@@ -266,7 +294,10 @@ async def _run_virtual(options: DemoOptions) -> DemoReport:
     if scope.cancelled_caught:
         error = f"the run did not finish within {options.timeout:g} s of link time"
     seconds = trio.current_time() - start
-    add_goodput(figures, seconds)
+    if options.transport == "serial":
+        add_rates(figures, seconds, line_capacity(options.link))
+    else:
+        add_rates(figures, seconds)
     return make_report(options, run, figures, seconds, error)
 
 
@@ -328,16 +359,19 @@ def print_report(report: DemoReport, *, as_json: bool) -> None:
     if link:
         keys = (
             "rtt_s",
-            "goodput_Bps",
             "bytes_sent",
             "bytes_received",
+            "payload_sent_Bps",
+            "payload_received_Bps",
+            "line_use_sent",
+            "line_use_received",
             "retransmissions",
             "check_failures",
             "naks_received",
             "reconnects",
         )
         shown = ", ".join(
-            f"{k} {link[k]:.3f}" if isinstance(link[k], float) else f"{k} {link[k]}"
+            f"{k} {round(link[k], 3):g}" if isinstance(link[k], float) else f"{k} {link[k]}"
             for k in keys
             if k in link and link[k] is not None
         )

@@ -24,7 +24,7 @@ from ._demo import (
     IDENTITY,
     DemoOptions,
     DemoReport,
-    add_goodput,
+    add_rates,
     client_link_figures,
     drive,
     endpoint_overrides,
@@ -141,7 +141,9 @@ async def _control(options: DemoOptions, args: argparse.Namespace, key: bytes | 
     except (SessionError, serialsocket.DialError, trio.BrokenResourceError, OSError) as exc:
         error = explain_failure(exc)
     seconds = trio.current_time() - start
-    add_goodput(figures, seconds)
+    # An 8N1 serial line carries baud / 10 characters a second each way.
+    cps = args.baud / 10 if args.transport == "serial" else None
+    add_rates(figures, seconds, (cps, cps))
     return make_report(options, run, figures, seconds, error)
 
 

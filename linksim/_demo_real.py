@@ -35,11 +35,12 @@ from ._demo import (
     IDENTITY,
     DemoOptions,
     DemoReport,
-    add_goodput,
+    add_rates,
     client_link_figures,
     drive,
     endpoint_overrides,
     explain_failure,
+    line_capacity,
     make_report,
     new_run,
     run_title,
@@ -134,7 +135,10 @@ async def run_real(options: DemoOptions) -> DemoReport:
     relay: RelayStatistics | None = holder.get("relay")
     if relay is not None:
         figures["line"] = _line_figures(relay)
-    add_goodput(figures, seconds)
+    if options.transport == "serial":
+        add_rates(figures, seconds, line_capacity(options.link))
+    else:
+        add_rates(figures, seconds)
     run: TaskRun | None = holder.get("run")
     return make_report(options, run, figures, seconds, error)
 

@@ -52,7 +52,7 @@ def test_virtual_serial_demo_runs_the_rock_task_over_noisy_moon() -> None:
     assert isinstance(link, dict)
     # A 1.3 s line each way: the round trip is at least 2.6 s.
     assert link["rtt_s"] > 2.6
-    for key in ("retransmissions", "check_failures", "goodput_Bps", "bytes_sent"):
+    for key in ("retransmissions", "check_failures", "payload_sent_Bps", "bytes_sent"):
         assert key in link
     log = report["command_log"]
     assert isinstance(log, list)
@@ -76,7 +76,7 @@ def test_virtual_tcp_demo() -> None:
     link = report["link"]
     assert link["bytes_sent"] == link["packets_sent"] * PACKET_SIZE > 0
     assert link["bytes_received"] == link["packets_received"] * PACKET_SIZE > 0
-    assert link["goodput_Bps"] > 0
+    assert link["payload_sent_Bps"] > 0
 
 
 def test_a_refused_command_stops_the_arm_and_fails_the_run() -> None:
