@@ -28,6 +28,7 @@ from ._demo import (
     DemoOptions,
     _virtual_streams,
     client_link_figures,
+    describe_failure,
     explain_failure,
     new_run,
     rtt_hint_for,
@@ -293,7 +294,7 @@ def _result(
     if error is None and run is not None and not run.ok:
         failure = run.first_failure
         if failure is not None:
-            error = f"the arm refused command #{failure.index} ({failure.label}): {failure.error}"
+            error = describe_failure(failure)
     ok = error is None and (run is None or run.count(CommandState.COMPLETED) == len(run.records))
     return ConsoleResult(ok, seconds, session, error, figures)
 

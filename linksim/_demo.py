@@ -35,7 +35,7 @@ from tcpstream import PACKET_SIZE, ArmClient, Server, ServerConfig, SessionError
 from ._arm import SimulatedArm
 from ._channel import open_impaired_link
 from ._config import DirectionConfig, LinkConfig
-from ._control import CommandState, TaskRun, feedback_record
+from ._control import CommandRecord, CommandState, TaskRun, feedback_record
 from ._pair import endpoint_config_for, serial_socket_pair
 from ._progress import Progress
 from ._tasks import rock_task
@@ -311,11 +311,25 @@ def make_report(
     if error is None and run is not None and not run.ok:
         failure = run.first_failure
         if failure is not None:
-            error = f"the arm refused command #{failure.index} ({failure.label}): {failure.error}"
+            error = describe_failure(failure)
     ok = error is None and run is not None and run.ok
     return DemoReport(
         ok, options.transport, options.virtual, options.preset, seconds, run, figures, error
     )
+
+
+_SESSION_ENDINGS = frozenset({"OutcomeUnknown", "SessionClosed", "WatchdogExpired"})
+"""Record reasons that are the session's end, not the arm's answer."""
+
+
+def describe_failure(failure: CommandRecord) -> str:
+    """What went wrong, in words: the arm refusing a command is not the link dying."""
+    if failure.reason in _SESSION_ENDINGS:
+        command = f"#{failure.index} ({failure.label})"
+        return f"the link failed with command {command} unanswered: {failure.error}"
+    if failure.reason == "NOT_RUN":
+        return f"command #{failure.index} ({failure.label}) was not run: {failure.error}"
+    return f"the arm refused command #{failure.index} ({failure.label}): {failure.error}"
 
 
 def explain_failure(exc: BaseException) -> str:

@@ -356,7 +356,7 @@ class ArmClient:
             stream = await self._factory()
         except (OSError, trio.BrokenResourceError) as exc:
             # Connection refused, no route, a TLS certificate the client does not trust...
-            self._failure = SessionClosed(f"cannot reach the arm: {exc!r}")
+            self._failure = SessionClosed(f"cannot reach the arm: {_describe(exc)}")
             self._failure.__cause__ = exc
             self._closed.set()
             return
@@ -364,10 +364,14 @@ class ArmClient:
         # stream that opens but never gets a grant uses one just like a stream
         # that cannot be opened, so an arm that never answers is given up on.
         used = 0
+        # Why the client ends, for every command it must settle: the session's
+        # own end (with the stream's error) and the last reconnect failure.
+        lost = "the session ended"
         try:
             while True:
                 self._granted_now = False
                 ended = await self._run_session(stream)
+                lost = f"the link to the arm was lost ({ended.message})"
                 granted_once = granted_once or self._granted_now
                 if self._granted_now:
                     used = 0
@@ -376,14 +380,22 @@ class ArmClient:
                         self._failure = SessionClosed(f"no session: {ended.message}", ended.reason)
                     break
                 next_stream: trio.abc.Stream | None = None
+                last_error = ""
                 while next_stream is None and used < self._reconnect_attempts:
                     await trio.sleep(self._reconnect_delay * 2**used)
                     used += 1
                     try:
                         next_stream = await self._factory()
                     except (OSError, trio.BrokenResourceError) as exc:
-                        log.info("reconnect attempt %d failed: %s", used, exc)
+                        last_error = _describe(exc)
+                        log.info("reconnect attempt %d failed: %s", used, last_error)
                 if next_stream is None:
+                    if self._reconnect_attempts == 0:
+                        lost += "; reconnecting is off"
+                    else:
+                        tries = f"{used} reconnect attempt{'s' if used != 1 else ''}"
+                        lost += f"; {tries} failed"
+                        lost += f" (last: {last_error})" if last_error else ""
                     break
                 if self._closing():  # closed while we were reconnecting
                     await trio.aclose_forcefully(next_stream)
@@ -393,7 +405,7 @@ class ArmClient:
         finally:
             self._closed.set()
             self._notify()
-            self._fail_pending(SessionClosed("the session ended and could not be resumed"))
+            self._fail_pending(SessionClosed(f"{lost}; the session could not be resumed"))
             for ch in self._subscribers:
                 ch.close()
 
@@ -415,7 +427,13 @@ class ArmClient:
         pump.kick()
         await pump.run()
         self._ready = trio.Event()
-        return ended[0] if ended else SessionEnded(CloseReason.PEER_EOF, "stream ended", True)
+        end = ended[0] if ended else SessionEnded(CloseReason.PEER_EOF, "stream ended", True)
+        if pump.stream_error is not None:
+            # "the stream ended without a BYE" says little; the stream's own
+            # error says why (a dead serial link with its byte counts, a reset).
+            why = f"{end.message}: {_describe(pump.stream_error)}"
+            end = SessionEnded(end.reason, why, end.by_peer)
+        return end
 
     # --- events -----------------------------------------------------------------
 
@@ -671,6 +689,15 @@ class ArmClient:
         self, minimum: Sequence[float], maximum: Sequence[float]
     ) -> CommandResult:
         return await self.send(build.add_obstacle(minimum, maximum))
+
+
+def _describe(exc: BaseException) -> str:
+    """One line for an error: its text, and its cause's when that adds something."""
+    text = str(exc) or type(exc).__name__
+    cause = exc.__cause__
+    if cause is not None and str(cause) and str(cause) not in text:
+        text += f" ({type(cause).__name__}: {cause})"
+    return text
 
 
 async def _set_when(event: trio.Event, scope: trio.CancelScope) -> None:

@@ -83,6 +83,10 @@ class Pump:
         """Times the reader paused because the peer sent faster than ``read_limit``."""
         self.throttled_for = 0.0
         """Seconds the reader spent in those pauses."""
+        self.stream_error: BaseException | None = None
+        """The first error the stream raised (its ``__cause__`` says why: a dead
+        serial link, a reset TCP connection), for the reports; None if it ended
+        cleanly."""
 
     @property
     def idle(self) -> bool:
@@ -189,6 +193,7 @@ class Pump:
                 data = bytes(await self.stream.receive_some(want))
             except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
                 log.debug("stream failed: %r", exc)
+                self.stream_error = self.stream_error or exc
                 data = b""
             if limit is not None:
                 limit.spend(len(data), trio.current_time())
@@ -240,6 +245,7 @@ class Pump:
                 try:
                     await self.stream.send_all(data)
                 except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    self.stream_error = self.stream_error or exc
                     # The peer may have written its last words (a REFUSE, a BYE)
                     # and closed before reading ours: let the reader take them
                     # before the end of the stream is declared.

@@ -170,3 +170,59 @@ def test_submit_during_reconnects_waits_for_the_session_and_leaks_nothing() -> N
 
     run(main)
     assert len([c for c in arm.executed if c.code is CommandCode.MOVE_JOINT]) == 60
+
+
+class _DiesWithACause(trio.abc.Stream):
+    """A stream that breaks the way a serial socket does: BrokenResourceError
+    whose cause says what happened to the line."""
+
+    def __init__(self, inner: trio.abc.Stream) -> None:
+        self.inner = inner
+        self.dead = False
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        if self.dead:
+            raise trio.BrokenResourceError("link dead") from ConnectionError("line lost at 7 s")
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        while not self.dead:
+            with trio.move_on_after(0.05):
+                return await self.inner.receive_some(max_bytes)
+        raise trio.BrokenResourceError("link dead") from ConnectionError("line lost at 7 s")
+
+    async def aclose(self) -> None:
+        await trio.aclose_forcefully(self.inner)
+
+
+def test_a_client_that_cannot_resume_says_why_for_each_command() -> None:
+    arm = FakeArm(move_time=30.0)
+
+    async def main() -> None:
+        async with Server(arm) as server, trio.open_nursery() as nursery:
+            streams: list[_DiesWithACause] = []
+
+            async def factory() -> trio.abc.Stream:
+                if streams:
+                    raise OSError("no carrier")
+                client_end, server_end = trio.testing.memory_stream_pair()
+                nursery.start_soon(server.serve_stream, server_end)
+                streams.append(_DiesWithACause(client_end))
+                return streams[-1]  # type: ignore[return-value]
+
+            async with ArmClient(factory, reconnect_attempts=2, reconnect_delay=0.1) as c:
+                handle = await c.submit(commands.move_joint(1, 0.1))
+                await handle.accepted()
+                streams[0].dead = True
+                with pytest.raises(OutcomeUnknown) as info:
+                    await handle.completed()
+            nursery.cancel_scope.cancel()
+        text = str(info.value)
+        assert "the link to the arm was lost" in text
+        assert "line lost at 7 s" in text  # the stream's own cause
+        assert "2 reconnect attempts failed (last: no carrier)" in text
+
+    run(main)

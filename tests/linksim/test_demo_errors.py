@@ -1,0 +1,26 @@
+"""A dead link is reported as a dead link, not as the arm refusing a command (issue 19)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from linksim import DemoOptions, LinkConfig, run_demo
+from linksim._config import Outage
+
+
+def test_a_link_that_dies_is_reported_as_the_link_failing() -> None:
+    link = LinkConfig.preset("noisy-moon")
+    forever = (Outage(12.0, 1e6),)
+    link = dataclasses.replace(
+        link,
+        a_to_b=dataclasses.replace(link.a_to_b, outages=forever),
+        b_to_a=dataclasses.replace(link.b_to_a, outages=forever),
+    )
+    report = run_demo(DemoOptions(link=link, virtual=True, progress=False)).as_dict()
+    assert report["ok"] is False
+    error = report["error"]
+    assert error.startswith("the link failed with command #1 (open fingers) unanswered: ")
+    assert "refused" not in error
+    assert "the link to the arm was lost" in error
+    assert "outcome unknown" in error
+    assert "Error(" not in error  # no Python repr
