@@ -83,7 +83,7 @@ class Progress:
             )
             self._live.__enter__()
         elif self.enabled:
-            self.console.print(self.title)
+            self._line(self.title)
         return self
 
     def __exit__(
@@ -102,9 +102,9 @@ class Progress:
         if not self.enabled:
             return
         if self._live is not None:
-            self._live.console.print(message)
+            self._live.console.print(message, markup=False)
         else:
-            self.console.print(message)
+            self._line(message)
 
     def changed(self) -> None:
         """Call after any change of the run (the TaskRun's ``on_change``)."""
@@ -121,10 +121,16 @@ class Progress:
             if record.state is CommandState.QUEUED:
                 continue
             extra = f" -- {record.reason}: {record.error}" if record.error else ""
-            self.console.print(
+            self._line(
                 f"[{elapsed:7.2f} s] #{record.index:<2} {record.state.value:<9} "
                 f"{record.label}{extra}"
             )
+
+    def _line(self, text: str) -> None:
+        # One event, one line, however long: rich would hard-wrap at the
+        # console width (80 when piped), splitting an event across lines and
+        # breaking grep.  No markup either: an event's text is data.
+        self.console.print(text, soft_wrap=True, markup=False)
 
     def _render(self) -> Group:
         now = self.clock()
