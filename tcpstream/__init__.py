@@ -68,6 +68,7 @@ from ._events import (
     SessionParameters,
     TelemetryReceived,
 )
+from ._options import ClientConfig, ClientOptions
 from ._packet import (
     MAGIC,
     PACKET_SIZE,
@@ -107,7 +108,9 @@ __all__ = [
     "BadMagic",
     "BadVersion",
     "BlockingClient",
+    "ClientConfig",
     "ClientConnection",
+    "ClientOptions",
     "ClientStatistics",
     "CloseReason",
     "Command",

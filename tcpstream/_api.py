@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import secrets
+import dataclasses
 import ssl
-from collections.abc import Callable
-from typing import Any, NoReturn
+from typing import Any, NoReturn, Unpack
 
 import trio
 
 from ._client import ArmClient, StreamFactory
 from ._commands import Executor
 from ._config import ServerConfig
-from ._events import Role
+from ._options import ClientConfig, ClientOptions, client_config
 from ._server import Server
 
 __all__ = ["DEFAULT_PORT", "connect_stream", "connect_tcp", "serve_stream", "serve_tcp"]
@@ -76,25 +75,17 @@ def connect_tcp(
     host: str,
     port: int = DEFAULT_PORT,
     *,
-    identity: str = "controller",
-    key: bytes | None = None,
-    observer: bool = False,
     ssl_context: ssl.SSLContext | None = None,
     server_hostname: str | None = None,
-    reconnect_attempts: int = 3,
-    reconnect_delay: float = 0.5,
-    handshake_timeout: float = 30.0,
-    max_in_flight: int = 32,
-    incarnation: int | None = None,
-    nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+    config: ClientConfig | None = None,
+    **options: Unpack[ClientOptions],
 ) -> ArmClient:
     """``async with connect_tcp(host, port, key=..., identity=...) as arm:``.
 
+    Options: a :class:`ClientConfig` and/or its fields as keywords (these win).
     Reconnects (and resumes, section 9 of PROTOCOL.md) by opening a new TCP
     connection to the same place, ``reconnect_attempts`` times at most.  With
     ``ssl_context`` the stream is TLS (``server_hostname`` defaults to ``host``).
-    ``incarnation`` (default: random) and ``nonce_source`` (default:
-    :func:`secrets.token_bytes`) are for reproducible runs; see :class:`ArmClient`.
     """
 
     async def factory() -> trio.abc.Stream:
@@ -109,39 +100,22 @@ def connect_tcp(
             raise
         return tls
 
-    return ArmClient(
-        factory,
-        identity=identity,
-        key=key,
-        role=Role.OBSERVER if observer else Role.CONTROLLER,
-        reconnect_attempts=reconnect_attempts,
-        reconnect_delay=reconnect_delay,
-        handshake_timeout=handshake_timeout,
-        max_in_flight=max_in_flight,
-        incarnation=incarnation,
-        nonce_source=nonce_source,
-    )
+    return ArmClient(factory, client_config(config, options))
 
 
 def connect_stream(
     stream: trio.abc.Stream,
     *,
-    identity: str = "controller",
-    key: bytes | None = None,
-    observer: bool = False,
     reconnect: StreamFactory | None = None,
-    reconnect_attempts: int = 3,
-    reconnect_delay: float = 0.5,
-    handshake_timeout: float = 30.0,
-    max_in_flight: int = 32,
-    incarnation: int | None = None,
-    nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+    config: ClientConfig | None = None,
+    **options: Unpack[ClientOptions],
 ) -> ArmClient:
     """``async with connect_stream(serial_socket, key=...) as arm:`` over any trio stream.
 
     ``reconnect``, when given, opens a replacement stream after a failure
     (for example: dial again and open a new serial socket); without it a
-    broken stream ends the client (pending commands fail with SessionClosed).
+    broken stream ends the client (no reconnection whatever
+    ``reconnect_attempts`` says; pending commands end OutcomeUnknown).
     """
     first: list[trio.abc.Stream] = [stream]
 
@@ -152,15 +126,7 @@ def connect_stream(
             raise OSError("the stream broke and no reconnect factory was given")
         return await reconnect()
 
-    return ArmClient(
-        factory,
-        identity=identity,
-        key=key,
-        role=Role.OBSERVER if observer else Role.CONTROLLER,
-        reconnect_attempts=reconnect_attempts if reconnect is not None else 0,
-        reconnect_delay=reconnect_delay,
-        handshake_timeout=handshake_timeout,
-        max_in_flight=max_in_flight,
-        incarnation=incarnation,
-        nonce_source=nonce_source,
-    )
+    settings = client_config(config, options)
+    if reconnect is None:
+        settings = dataclasses.replace(settings, reconnect_attempts=0)
+    return ArmClient(factory, settings)

@@ -28,14 +28,16 @@ import ssl
 import threading
 from collections.abc import Awaitable, Callable, Sequence
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import TypeVar, Unpack
 
 import trio
 
 from . import _builders as build
+from ._api import DEFAULT_PORT, connect_tcp
 from ._client import ArmClient
 from ._commands import Command, CommandResult, Feedback
 from ._errors import SessionClosed
+from ._options import ClientConfig, ClientOptions, client_config
 
 __all__ = ["BlockingClient", "WatchdogExpired"]
 
@@ -119,21 +121,28 @@ class BlockingClient:
     def tcp(
         cls,
         host: str,
-        port: int,
+        port: int = DEFAULT_PORT,
         *,
         timeout: float = 60.0,
         watchdog: float | None = None,
         ssl_context: ssl.SSLContext | None = None,
-        **options: Any,
+        server_hostname: str | None = None,
+        config: ClientConfig | None = None,
+        **options: Unpack[ClientOptions],
     ) -> BlockingClient:
-        """A blocking client for :func:`~tcpstream.connect_tcp` (same options).
+        """A blocking client for :func:`~tcpstream.connect_tcp` (same options, typed).
 
         ``timeout`` and ``watchdog`` are the :class:`BlockingClient`'s own.
         """
-        from ._api import connect_tcp
-
+        settings = client_config(config, options)  # checked here, not in the thread
         return cls(
-            lambda: connect_tcp(host, port, ssl_context=ssl_context, **options),
+            lambda: connect_tcp(
+                host,
+                port,
+                ssl_context=ssl_context,
+                server_hostname=server_hostname,
+                config=settings,
+            ),
             timeout=timeout,
             watchdog=watchdog,
         )

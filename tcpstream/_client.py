@@ -25,6 +25,7 @@ import secrets
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
+from typing import Unpack
 
 import trio
 
@@ -62,6 +63,7 @@ from ._events import (
     SessionParameters,
     TelemetryReceived,
 )
+from ._options import ClientConfig, ClientOptions, client_config
 from ._pump import Pump
 from ._state import SessionState
 
@@ -166,44 +168,34 @@ class ArmClient:
     Prefer :func:`connect_tcp` / :func:`connect_stream` to building one.
     ``stream_factory`` opens a fresh stream; it is called for the first
     connection and for every reconnection (``reconnect_attempts`` in a row at
-    most, ``reconnect_delay`` apart, doubling).  ``identity`` names the
-    controller to the arm (1..32 bytes of UTF-8); ``incarnation`` (default:
-    random, chosen once per client) keys the arm's exactly-once memory --
-    pass one only for reproducible runs, never reuse one across controller
-    restarts.  ``nonce_source`` (default :func:`secrets.token_bytes`) makes
-    handshakes reproducible in tests; never replace it in production.
-    ``max_in_flight`` bounds commands submitted and not yet answered.
+    most, ``reconnect_delay`` apart, doubling).  The options are a
+    :class:`ClientConfig` and/or its fields as keywords (these win), checked
+    here, in the caller's frame.
     """
 
     def __init__(
         self,
         stream_factory: StreamFactory,
-        *,
-        identity: str = "controller",
-        key: bytes | None = None,
-        role: Role = Role.CONTROLLER,
-        reconnect_attempts: int = 3,
-        reconnect_delay: float = 0.5,
-        handshake_timeout: float = 30.0,
-        max_in_flight: int = 32,
-        incarnation: int | None = None,
-        nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+        config: ClientConfig | None = None,
+        **options: Unpack[ClientOptions],
     ) -> None:
         self._factory = stream_factory
+        self.config = settings = client_config(config, options)
+        incarnation = settings.incarnation
         self.identity = ControllerIdentity(
-            identity, incarnation if incarnation is not None else secrets.randbits(64)
+            settings.identity, incarnation if incarnation is not None else secrets.randbits(64)
         )
+        role = Role.OBSERVER if settings.observer else Role.CONTROLLER
         # Check everything a connection would refuse now, in the caller's frame,
         # not later inside the background task.
-        ClientConnection(self.identity, role=role, key=key)
-        if max_in_flight < 1 or reconnect_attempts < 0 or reconnect_delay < 0:
-            raise ValueError("max_in_flight >= 1, reconnect_attempts >= 0, reconnect_delay >= 0")
-        self._key = key
+        ClientConnection(self.identity, role=role, key=settings.key)
+        self._key = settings.key
         self.role = role
-        self._reconnect_attempts = reconnect_attempts
-        self._reconnect_delay = reconnect_delay
-        self._handshake_timeout = handshake_timeout
-        self._nonce_source = nonce_source
+        self._reconnect_attempts = settings.reconnect_attempts
+        self._reconnect_delay = settings.reconnect_delay
+        self._handshake_timeout = settings.handshake_timeout
+        self._nonce_source = settings.nonce_source
+        max_in_flight = settings.max_in_flight
         # In-flight commands, bounded like the arm's queue: submit() waits for room.
         self._slots = trio.Semaphore(max_in_flight)
         self._pending: dict[int, CommandHandle] = {}

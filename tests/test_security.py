@@ -45,7 +45,6 @@ from tcpstream import (
     Granted,
     PacketKind,
     Refused,
-    Role,
     Server,
     ServerConfig,
     SessionEnded,
@@ -284,7 +283,7 @@ def test_a_packet_flood_is_slowed_to_the_rate_limit_and_nothing_is_lost() -> Non
                     return client_end
 
                 t0 = trio.current_time()
-                async with ArmClient(factory, key=KEY, identity="watch", role=Role.OBSERVER):
+                async with ArmClient(factory, key=KEY, identity="watch", observer=True):
                     observer_granted.append(trio.current_time() - t0)
 
             async with trio.open_nursery() as nursery:

@@ -24,7 +24,6 @@ from tcpstream import (
     PacketKind,
     Refused,
     RefuseReason,
-    Role,
     Server,
     ServerConfig,
     commands,
@@ -154,7 +153,7 @@ def test_second_controller_is_refused_and_an_observer_gets_telemetry() -> None:
                     pass
             assert info.value.reason is RefuseReason.BUSY
             assert "observer" in info.value.message
-            async with w.client(identity="watcher", role=Role.OBSERVER) as watcher:
+            async with w.client(identity="watcher", observer=True) as watcher:
                 with pytest.raises(LocalProtocolError):
                     await watcher.status()
                 await first.move_joints([0.3] * 6)
@@ -192,7 +191,7 @@ def test_server_full_refuses_with_a_reason() -> None:
         config = ServerConfig(max_connections=1)
         async with wired(arm, config) as w, w.client(identity="one"):
             with pytest.raises(Refused) as info:
-                async with w.client(identity="two", role=Role.OBSERVER):
+                async with w.client(identity="two", observer=True):
                     pass
             assert info.value.reason is RefuseReason.SERVER_FULL
 
