@@ -68,6 +68,7 @@ from ._events import (
     SessionParameters,
     TelemetryReceived,
 )
+from ._keys import KEY_SIZE, generate_key, load_key_file, write_key_file
 from ._options import ClientConfig, ClientOptions
 from ._packet import (
     MAGIC,
@@ -95,6 +96,7 @@ __all__ = [
     "AUX_WORDS",
     "DEFAULT_PORT",
     "JOINTS",
+    "KEY_SIZE",
     "MAGIC",
     "MAX_BAD_IN_A_ROW",
     "MAX_PATH_POINTS",
@@ -166,7 +168,10 @@ __all__ = [
     "connect_tcp",
     "decode_packet",
     "encode_packet",
+    "generate_key",
+    "load_key_file",
     "serve_stream",
     "serve_tcp",
     "validate_arguments",
+    "write_key_file",
 ]

@@ -237,6 +237,7 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "Granted",
             "IllegalTransition",
             "JOINTS",
+            "KEY_SIZE",
             "LocalProtocolError",
             "MAGIC",
             "MAX_BAD_IN_A_ROW",
@@ -276,9 +277,12 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "connect_tcp",
             "decode_packet",
             "encode_packet",
+            "generate_key",
+            "load_key_file",
             "serve_stream",
             "serve_tcp",
             "validate_arguments",
+            "write_key_file",
         ]
     )
     for name in tcpstream.__all__:
