@@ -27,6 +27,17 @@ import serialsocket
 from tcpstream import Server, ServerConfig
 
 from ._arm import SimulatedArm
+from ._cliargs import (
+    BAUD,
+    BIT_RATE,
+    COUNT,
+    DELAY,
+    ENDPOINT_LENGTH,
+    SERIAL_PORT,
+    TCP_PORT_OR_ANY,
+    WINDOW,
+    FloatRange,
+)
 from ._config import LinkConfig
 from ._pair import endpoint_config_for
 from ._world import DEFAULT_WORLD, WorldConfig
@@ -101,28 +112,34 @@ async def serve_arm_tcp(
             await listener.aclose()
 
 
+_PACKET_RATE = FloatRange(0.0, 1e6, unit="packets a second")
+"""--max-packet-rate: 0 is no limit; a million a second is more than any link carries."""
+
+
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim arm-server``."""
     ap.add_argument("--transport", choices=["serial", "tcp"], default="serial")
-    ap.add_argument("--port", help="serial device or pty path (serial transport)")
-    ap.add_argument("--baud", type=int, default=9600, help="line rate, bit/s (default 9600)")
+    ap.add_argument("--port", type=SERIAL_PORT, help="serial device or pty path (serial transport)")
+    ap.add_argument("--baud", type=BAUD, default=9600, help="line rate, bit/s (default 9600)")
     ap.add_argument("--answer", action="store_true", help="answer a modem call before serving")
     ap.add_argument("--host", default="127.0.0.1", help="TCP address (default loopback)")
-    ap.add_argument("--tcp-port", type=int, default=7010, help="TCP port (0: any free port)")
-    ap.add_argument("--delay", type=float, default=0.0, help="one-way delay hint, s")
-    ap.add_argument("--rate", type=float, help="line rate hint, bit/s (default: --baud)")
-    ap.add_argument("--window", type=int, help="serial socket window (1..31)")
-    ap.add_argument("--max-len", type=int, help="serial packet length limit")
+    ap.add_argument(
+        "--tcp-port", type=TCP_PORT_OR_ANY, default=7010, help="TCP port (0: any free port)"
+    )
+    ap.add_argument("--delay", type=DELAY, default=0.0, help="one-way delay hint, s")
+    ap.add_argument("--rate", type=BIT_RATE, help="line rate hint, bit/s (default: --baud)")
+    ap.add_argument("--window", type=WINDOW, help="serial socket window (1..31)")
+    ap.add_argument("--max-len", type=ENDPOINT_LENGTH, help="serial packet length limit")
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
     ap.add_argument("--key-file", help="file holding the pre-shared key (>= 16 bytes)")
     ap.add_argument(
         "--max-packet-rate",
-        type=float,
+        type=_PACKET_RATE,
         default=200.0,
         help="packets a second each connection may send before its reads are slowed "
         "(default 200; at least 16 at the default heartbeat; 0: no limit)",
     )
-    ap.add_argument("--sessions", type=int, help="exit after this many sessions")
+    ap.add_argument("--sessions", type=COUNT, help="exit after this many sessions (>= 1)")
     ap.add_argument("-v", "--verbose", action="store_true", help="log sessions to stderr")
 
 

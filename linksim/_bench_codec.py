@@ -35,6 +35,8 @@ from serialsocket import (
     data_capacity,
 )
 
+from ._cliargs import COUNT, KERMIT_LENGTH, SIZE
+
 __all__ = ["add_arguments", "run", "sample_payload"]
 
 _WORDS = (
@@ -125,9 +127,9 @@ def run(size: int, repeat: int, max_len: int) -> list[dict[str, object]]:
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench codec``."""
-    ap.add_argument("--size", type=int, default=1 << 20, help="payload bytes (default 1 MiB)")
-    ap.add_argument("--repeat", type=int, default=5, help="runs per figure; the best is kept")
-    ap.add_argument("--max-len", type=int, default=DEFAULT_MAX_PACKET_LENGTH)
+    ap.add_argument("--size", type=SIZE, default=1 << 20, help="payload bytes (default 1 MiB)")
+    ap.add_argument("--repeat", type=COUNT, default=5, help="runs per figure; the best is kept")
+    ap.add_argument("--max-len", type=KERMIT_LENGTH, default=DEFAULT_MAX_PACKET_LENGTH)
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
 

@@ -29,6 +29,8 @@ import trio
 
 from tcpstream import ClientConnection, Completed, ControllerIdentity, SessionState, commands
 
+from ._cliargs import SECONDS, FloatRange
+
 __all__ = ["add_arguments", "main", "run"]
 
 _BATCH = 64
@@ -140,11 +142,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench flood``."""
     ap.add_argument(
         "--limit",
-        type=float,
+        type=FloatRange(0.0, 1e6, unit="packets a second"),
         action="append",
         help="server --max-packet-rate for one run (repeatable; 0: none); default 200 and 0",
     )
-    ap.add_argument("--seconds", type=float, default=8.0, help="flood length per run (default 8)")
+    ap.add_argument("--seconds", type=SECONDS, default=8.0, help="flood length per run (default 8)")
     ap.add_argument("--json", action="store_true", help="print a JSON array and nothing else")
 
 

@@ -47,6 +47,7 @@ from ._bench_grid import (
     run_grid,
 )
 from ._bench_transfer import BENCH_BURST, PROFILES, limit_goodput, simulate
+from ._cliargs import BAUD, DELAY, ENDPOINT_LENGTH, JOBS, PROBABILITY, SEED, SIZE, WINDOW
 
 __all__ = ["GoodputResult", "add_arguments", "main", "run_transfer", "theoretical_goodput"]
 
@@ -179,9 +180,11 @@ def _length(text: str) -> int | str:
     if text == "auto":
         return text
     try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a length or 'auto', got {text!r}") from None
+        return ENDPOINT_LENGTH(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"must be a packet length in {ENDPOINT_LENGTH.describe()} or 'auto', got {text!r}"
+        ) from None
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -202,11 +205,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     custom = ap.add_argument_group(
         "custom points (cross product of the values given; the base point supplies the rest)"
     )
-    custom.add_argument("--rate", type=int, action="append", help="line rate, bit/s")
-    custom.add_argument("--delay", type=float, action="append", help="one-way delay, s")
-    custom.add_argument("--ber", type=float, action="append", help="byte error rate")
+    custom.add_argument("--rate", type=BAUD, action="append", help="line rate, bit/s")
+    custom.add_argument("--delay", type=DELAY, action="append", help="one-way delay, s")
+    custom.add_argument("--ber", type=PROBABILITY, action="append", help="byte error rate")
     custom.add_argument("--burst", action="store_true", help="add Gilbert-Elliott bursts")
-    custom.add_argument("--window", type=int, action="append", help="window, 1..31")
+    custom.add_argument("--window", type=WINDOW, action="append", help="window, 1..31")
     custom.add_argument(
         "--max-len", type=_length, action="append", help="max packet length, or 'auto'"
     )
@@ -214,11 +217,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     custom.add_argument("--profile", choices=sorted(PROFILES), action="append")
     custom.add_argument("--eight-bit", action="store_true", help="same as --profile 8bit")
     ap.add_argument(
-        "--size", type=int, help="payload bytes per point (default: sized for steady state)"
+        "--size", type=SIZE, help="payload bytes per point (default: sized for steady state)"
     )
-    ap.add_argument("--seed", type=int, default=1, help="payload and line seed (default 1)")
+    ap.add_argument("--seed", type=SEED, default=1, help="payload and line seed (default 1)")
     ap.add_argument(
-        "--jobs", type=int, default=min(2, cpu_count()), help="worker processes (default 2)"
+        "--jobs", type=JOBS, default=min(2, cpu_count()), help="worker processes (default 2)"
     )
     ap.add_argument("--json", action="store_true", help="print the rows as a JSON array only")
     ap.add_argument("--output", type=Path, metavar="FILE", help="also write the rows here")

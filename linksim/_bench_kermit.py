@@ -35,6 +35,18 @@ import trio
 
 from serialsocket import KermitConfig, KermitStatistics, kermit_receive, kermit_send, open_port
 
+from ._cliargs import (
+    BIT_RATE,
+    COUNT,
+    DELAY,
+    KERMIT_LENGTH,
+    PROBABILITY,
+    SECONDS,
+    SEED,
+    SIZE,
+    WINDOW,
+    IntRange,
+)
 from ._config import DirectionConfig, LinkConfig
 from ._relay import run_relay
 
@@ -348,16 +360,20 @@ def _measure(
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench kermit``."""
-    ap.add_argument("--size", type=int, default=200_000, help="file bytes (default 200000)")
-    ap.add_argument("--runs", type=int, default=3, help="runs per pairing; the median is kept")
-    ap.add_argument("--window", type=int, default=8, help="window slots (default 8)")
-    ap.add_argument("--packet-length", type=int, default=1000, help="packet length (1000)")
-    ap.add_argument("--delay", type=float, default=0.1, help="one-way delay, s (default 0.1)")
-    ap.add_argument("--ber", type=float, default=1e-4, help="byte error rate (default 1e-4)")
-    ap.add_argument("--rate", type=float, help="line rate, bit/s (default: pty speed)")
-    ap.add_argument("--timeout", type=int, default=5, help="fixed timeout, s (default 5)")
-    ap.add_argument("--limit", type=float, default=300.0, help="hard limit per transfer, s")
-    ap.add_argument("--seed", type=int, default=1, help="relay seed of the first run")
+    ap.add_argument("--size", type=SIZE, default=200_000, help="file bytes (default 200000)")
+    ap.add_argument("--runs", type=COUNT, default=3, help="runs per pairing; the median is kept")
+    ap.add_argument("--window", type=WINDOW, default=8, help="window slots (default 8)")
+    ap.add_argument(
+        "--packet-length", type=KERMIT_LENGTH, default=1000, help="packet length (1000)"
+    )
+    ap.add_argument("--delay", type=DELAY, default=0.1, help="one-way delay, s (default 0.1)")
+    ap.add_argument("--ber", type=PROBABILITY, default=1e-4, help="byte error rate (default 1e-4)")
+    ap.add_argument("--rate", type=BIT_RATE, help="line rate, bit/s (default: pty speed)")
+    ap.add_argument(
+        "--timeout", type=IntRange(1, 3600), default=5, help="fixed timeout, s (default 5)"
+    )
+    ap.add_argument("--limit", type=SECONDS, default=300.0, help="hard limit per transfer, s")
+    ap.add_argument("--seed", type=SEED, default=1, help="relay seed of the first run")
     ap.add_argument(
         "--pairs",
         nargs="+",

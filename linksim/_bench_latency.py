@@ -46,6 +46,8 @@ from tcpstream import (
     serve_tcp,
 )
 
+from ._cliargs import COUNT, IntRange
+
 __all__ = ["InstantArm", "add_arguments", "main", "run"]
 
 NO_RATE_LIMIT = None
@@ -250,8 +252,10 @@ def run(
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench latency``."""
-    ap.add_argument("--count", type=int, default=2000, help="round trips of each kind")
-    ap.add_argument("--warmup", type=int, default=200, help="untimed round trips first")
+    ap.add_argument("--count", type=COUNT, default=2000, help="round trips of each kind")
+    ap.add_argument(
+        "--warmup", type=IntRange(0, 1_000_000), default=200, help="untimed round trips first"
+    )
     ap.add_argument("--key", action="store_true", help="authenticate (HMAC tag on every packet)")
     ap.add_argument(
         "--transport",

@@ -27,6 +27,8 @@ import trio
 
 from serialsocket import EndpointConfig, SerialSocket, accept, connect, open_pty_pair
 
+from ._cliargs import COUNT, ENDPOINT_LENGTH, SIZE, WINDOW
+
 __all__ = ["add_arguments", "main", "measure", "run_bench_pty"]
 
 _DEFAULT_LENGTHS = (128, 4096)
@@ -111,16 +113,16 @@ def run_bench_pty(
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench pty``."""
-    ap.add_argument("--size", type=int, default=1 << 20, help="bytes per run (default 1 MiB)")
-    ap.add_argument("--runs", type=int, default=5, help="runs per length; the median is kept")
+    ap.add_argument("--size", type=SIZE, default=1 << 20, help="bytes per run (default 1 MiB)")
+    ap.add_argument("--runs", type=COUNT, default=5, help="runs per length; the median is kept")
     ap.add_argument(
         "--max-len",
-        type=int,
+        type=ENDPOINT_LENGTH,
         action="append",
         dest="lengths",
         help="packet length (repeatable; default 128 and 4096)",
     )
-    ap.add_argument("--window", type=int, default=16, help="window in packets (default 16)")
+    ap.add_argument("--window", type=WINDOW, default=16, help="window in packets (default 16)")
     ap.add_argument("--profile", metavar="FILE", help="also write a cProfile of one run per length")
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 

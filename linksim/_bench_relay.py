@@ -18,6 +18,8 @@ import sys
 import threading
 import time
 
+from ._cliargs import COUNT, SIZE
+
 __all__ = ["add_arguments", "main", "measure"]
 
 _CHUNK = 65536
@@ -87,8 +89,8 @@ def measure(size: int, repeat: int) -> dict[str, object]:
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim bench relay``."""
-    ap.add_argument("--size", type=int, default=64 << 20, help="bytes per run (default 64 MiB)")
-    ap.add_argument("--repeat", type=int, default=3, help="runs; the best is kept")
+    ap.add_argument("--size", type=SIZE, default=64 << 20, help="bytes per run (default 64 MiB)")
+    ap.add_argument("--repeat", type=COUNT, default=3, help="runs; the best is kept")
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
 

@@ -26,6 +26,16 @@ from . import (
     _console_cli,
     _demo_cli,
 )
+from ._cliargs import (
+    BIT_RATE,
+    BITS_PER_CHAR,
+    DELAY,
+    PROBABILITY,
+    SECONDS,
+    SECONDS_OR_ZERO,
+    SEED,
+    SERIAL_PORT,
+)
 from ._config import PRESETS, ConfigError, DirectionConfig, GilbertElliott, LinkConfig, Outage
 from ._modem import CallOutcome, ModemConfig, ModemPair
 from ._relay import RelayStatistics, run_relay
@@ -70,16 +80,22 @@ def add_link_arguments(ap: argparse.ArgumentParser) -> None:
     g = ap.add_argument_group("line (applied to both directions, over --preset or --config)")
     g.add_argument("--preset", choices=PRESETS, help="named preset (default: clean)")
     g.add_argument("--config", type=pathlib.Path, help="TOML file (see LinkConfig.from_toml)")
-    g.add_argument("--seed", type=int, help="RNG seed (default 0)")
-    g.add_argument("--rate", type=float, help="line rate, bit/s")
-    g.add_argument("--bits", type=int, dest="bits_per_char", help="bits per character (8N1 = 10)")
-    g.add_argument("--delay", type=float, help="one-way delay, s")
-    g.add_argument("--jitter", type=float, help="order-preserving jitter, s (uniform 0..J)")
-    g.add_argument("--loss", type=float, help="byte loss probability")
+    g.add_argument("--seed", type=SEED, help="RNG seed (default 0)")
+    g.add_argument("--rate", type=BIT_RATE, help="line rate, bit/s")
     g.add_argument(
-        "--ber", "--byte-error-rate", type=float, dest="byte_error_rate", help="byte error rate"
+        "--bits", type=BITS_PER_CHAR, dest="bits_per_char", help="bits per character (8N1 = 10)"
     )
-    g.add_argument("--noise", type=float, help="probability of a noise byte after each byte")
+    g.add_argument("--delay", type=DELAY, help="one-way delay, s")
+    g.add_argument("--jitter", type=DELAY, help="order-preserving jitter, s (uniform 0..J)")
+    g.add_argument("--loss", type=PROBABILITY, help="byte loss probability")
+    g.add_argument(
+        "--ber",
+        "--byte-error-rate",
+        type=PROBABILITY,
+        dest="byte_error_rate",
+        help="byte error rate",
+    )
+    g.add_argument("--noise", type=PROBABILITY, help="probability of a noise byte after each byte")
     g.add_argument("--burst", type=_burst, help="Gilbert-Elliott P_GB:P_BG[:E_BAD[:E_GOOD]]")
     g.add_argument(
         "--outage", type=_outage, action="append", dest="outages", help="T1:T2 (repeatable)"
@@ -110,19 +126,25 @@ def config_from_args(args: argparse.Namespace) -> LinkConfig:
 def _relay_arguments(ap: argparse.ArgumentParser) -> None:
     add_link_arguments(ap)
     ap.add_argument(
-        "--device", action="append", dest="devices", help="attach to this tty (give two)"
+        "--device",
+        type=SERIAL_PORT,
+        action="append",
+        dest="devices",
+        help="attach to this tty (give two)",
     )
     ap.add_argument("--json", action="store_true", help='print {"a": PATH, "b": PATH} on one line')
     ap.add_argument("--stats", action="store_true", help="print live counters to stderr")
-    ap.add_argument("--stats-interval", type=float, default=1.0, help="seconds between counters")
-    ap.add_argument("--duration", type=float, help="stop after this many seconds")
+    ap.add_argument("--stats-interval", type=SECONDS, default=1.0, help="seconds between counters")
+    ap.add_argument("--duration", type=SECONDS, help="stop after this many seconds")
     m = ap.add_argument_group("modems")
     m.add_argument("--modem", action="store_true", help="put both ends behind Hayes modems")
     m.add_argument("--busy", action="append", default=[], help="number that answers BUSY")
     m.add_argument("--no-answer", action="append", default=[], help="number that never answers")
-    m.add_argument("--dial-time", type=float, default=2.0, help="ATD to first RING, s")
-    m.add_argument("--ring-interval", type=float, default=6.0, help="between RINGs, s")
-    m.add_argument("--handshake-time", type=float, default=1.5, help="answer to CONNECT, s")
+    m.add_argument("--dial-time", type=SECONDS_OR_ZERO, default=2.0, help="ATD to first RING, s")
+    m.add_argument("--ring-interval", type=SECONDS, default=6.0, help="between RINGs, s")
+    m.add_argument(
+        "--handshake-time", type=SECONDS_OR_ZERO, default=1.5, help="answer to CONNECT, s"
+    )
 
 
 def _stats_record(stats: RelayStatistics) -> dict[str, Any]:
@@ -145,6 +167,14 @@ def _print_stats(stats: RelayStatistics, as_json: bool) -> None:
             f" in-flight {d.bytes_in_flight}"
         )
     print(f"[{stats.elapsed:9.1f}s] " + " | ".join(parts), file=sys.stderr, flush=True)
+
+
+def _first_leaf(group: BaseExceptionGroup[BaseException]) -> BaseException:
+    """The first real exception in a (nested) nursery exception group."""
+    exc: BaseException = group
+    while isinstance(exc, BaseExceptionGroup):
+        exc = exc.exceptions[0]
+    return exc
 
 
 def relay_main(args: argparse.Namespace) -> int:
@@ -203,8 +233,12 @@ def relay_main(args: argparse.Namespace) -> int:
         return result
 
     try:
-        final = trio.run(run)
+        try:
+            final = trio.run(run)
+        except BaseExceptionGroup as group:
+            raise _first_leaf(group) from None
     except (OSError, ValueError) as exc:
+        # A --device that cannot be opened arrives from inside the relay's nursery.
         print(f"linksim relay: {exc}", file=sys.stderr)
         return 1
     if args.stats:

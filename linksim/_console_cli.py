@@ -17,6 +17,7 @@ import sys
 import serialsocket
 
 from ._armserver import _read_key
+from ._cliargs import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange
 from ._config import ConfigError, DirectionConfig, LinkConfig
 from ._console_run import ConsoleOptions, run_console
 from ._demo import DemoOptions
@@ -25,6 +26,10 @@ from ._tasks import rock_task
 from ._world import DEFAULT_WORLD, WorldConfig
 
 __all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
+
+
+_SPEEDUP = FloatRange(0.0, 1e6, unit="times real time")
+"""--speedup: 0 runs as fast as possible; a million times real time is a typo's neighbour."""
 
 
 def add_console_arguments(ap: argparse.ArgumentParser) -> None:
@@ -42,7 +47,7 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument(
         "--speedup",
-        type=float,
+        type=_SPEEDUP,
         default=0.0,
         help="with --virtual: run the virtual clock this many times faster than real time "
         "to watch the run (default 0: as fast as possible)",
@@ -61,15 +66,15 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--log", metavar="FILE", help="write every state and command event (JSONL)")
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
-    ap.add_argument("--port", help="serial device or pty path (serial transport)")
-    ap.add_argument("--baud", type=int, default=9600, help="line rate, bit/s (default 9600)")
+    ap.add_argument("--port", type=SERIAL_PORT, help="serial device or pty path (serial transport)")
+    ap.add_argument("--baud", type=BAUD, default=9600, help="line rate, bit/s (default 9600)")
     ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
     ap.add_argument("--host", default="127.0.0.1", help="arm server address (tcp)")
-    ap.add_argument("--tcp-port", type=int, default=7010, help="arm server port (tcp)")
+    ap.add_argument("--tcp-port", type=TCP_PORT, default=7010, help="arm server port (tcp)")
     ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
     ap.add_argument("--plain", action="store_true", help="line output even on a terminal")
     ap.add_argument("--json", action="store_true", help="print a final summary as JSON")
-    ap.add_argument("--timeout", type=float, default=600.0, help="give up after this many s")
+    ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
 
 
 def console_main(args: argparse.Namespace) -> int:

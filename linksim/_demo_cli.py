@@ -18,6 +18,7 @@ import serialsocket
 from tcpstream import SessionError, connect_stream, connect_tcp
 
 from ._armserver import _read_key
+from ._cliargs import BAUD, DELAY, ENDPOINT_LENGTH, SECONDS, SERIAL_PORT, TCP_PORT, WINDOW
 from ._config import ConfigError, DirectionConfig, LinkConfig
 from ._control import TaskRun
 from ._demo import (
@@ -43,13 +44,15 @@ __all__ = ["add_control_arguments", "add_demo_arguments", "control_main", "demo_
 
 def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--transport", choices=["serial", "tcp"], default="serial")
-    ap.add_argument("--window", type=int, help="serial socket window, 1..31")
-    ap.add_argument("--max-len", type=int, help="serial packet length limit (default 128)")
+    ap.add_argument("--window", type=WINDOW, help="serial socket window, 1..31")
+    ap.add_argument(
+        "--max-len", type=ENDPOINT_LENGTH, help="serial packet length limit (default 128)"
+    )
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
     ap.add_argument("--json", action="store_true", help="print the final report as JSON only")
     ap.add_argument("--plain", action="store_true", help="status lines, not a live table")
     ap.add_argument("--quiet", action="store_true", help="no progress display")
-    ap.add_argument("--timeout", type=float, default=600.0, help="give up after this many s")
+    ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
 
 
 def add_demo_arguments(ap: argparse.ArgumentParser) -> None:
@@ -119,12 +122,12 @@ def demo_main(args: argparse.Namespace) -> int:
 def add_control_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim control``."""
     _common(ap)
-    ap.add_argument("--port", help="serial device or pty path (serial transport)")
-    ap.add_argument("--baud", type=int, default=9600, help="line rate, bit/s (default 9600)")
-    ap.add_argument("--delay", type=float, default=0.0, help="one-way delay hint, s")
+    ap.add_argument("--port", type=SERIAL_PORT, help="serial device or pty path (serial transport)")
+    ap.add_argument("--baud", type=BAUD, default=9600, help="line rate, bit/s (default 9600)")
+    ap.add_argument("--delay", type=DELAY, default=0.0, help="one-way delay hint, s")
     ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
     ap.add_argument("--host", default="127.0.0.1", help="arm server address (tcp)")
-    ap.add_argument("--tcp-port", type=int, default=7010, help="arm server port (tcp)")
+    ap.add_argument("--tcp-port", type=TCP_PORT, default=7010, help="arm server port (tcp)")
     ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
 
 

@@ -59,12 +59,13 @@ from tcpstream import (
 )
 
 from ._arm import SimulatedArm
+from ._cliargs import SEED, FloatRange
 from ._config import LinkConfig, Outage
 from ._demo import rtt_hint_for
 from ._pair import endpoint_config_for, serial_socket_pair
 from ._virtual import run_virtual
 
-__all__ = ["OUTAGE_LENGTHS", "SoakReport", "check", "main", "run_soak"]
+__all__ = ["OUTAGE_LENGTHS", "SoakReport", "build_parser", "check", "main", "run_soak"]
 
 OUTAGE_LENGTHS = (30.0, 300.0, 5.0, 900.0)
 """Seconds, in turn: one well past the deadman, one of five minutes, one shorter
@@ -367,19 +368,26 @@ def check(report: SoakReport) -> list[str]:
     return problems
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m linksim._soak [--hours H] [--seed N]``: run, print JSON, exit 1 on failure."""
+_HOURS = FloatRange(0.0, 24.0 * 365, lo_open=True, unit="hours")
+"""Simulated hours: a year of virtual time is the most anyone will wait for."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The soak's options."""
     ap = argparse.ArgumentParser(prog="python -m linksim._soak", description=__doc__)
-    ap.add_argument("--hours", type=float, default=24.0, help="simulated hours (default 24)")
-    ap.add_argument("--seed", type=int, default=0, help="impairment and traffic seed")
+    ap.add_argument("--hours", type=_HOURS, default=24.0, help="simulated hours (default 24)")
+    ap.add_argument("--seed", type=SEED, default=0, help="impairment and traffic seed")
     ap.add_argument(
-        "--outage-every", type=float, default=3.0, help="hours between outages (default 3)"
+        "--outage-every", type=_HOURS, default=3.0, help="hours between outages (default 3)"
     )
     ap.add_argument("--no-bulk", action="store_true", help="commands only")
     ap.add_argument("--quiet", action="store_true", help="no progress line per simulated hour")
-    args = ap.parse_args(argv)
-    if not args.hours > 0 or not args.outage_every > 0:
-        ap.error("--hours and --outage-every must be > 0")
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m linksim._soak [--hours H] [--seed N]``: run, print JSON, exit 1 on failure."""
+    args = build_parser().parse_args(argv)
     report = run_soak(
         args.hours,
         args.seed,

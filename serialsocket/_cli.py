@@ -16,6 +16,18 @@ import sys
 from collections.abc import Sequence
 
 from ._checks import BlockCheck
+from ._cliargs import (
+    BAUD,
+    DELAY,
+    ENDPOINT_LENGTH,
+    PACKET_LENGTH,
+    SECONDS,
+    SEQ,
+    SERIAL_PORT,
+    WINDOW,
+    PacketTypeLetter,
+    retype,
+)
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError, MalformedDataError
 from ._kermit_cli import add_arguments as add_kermit_arguments
@@ -40,6 +52,17 @@ def _check(value: str) -> BlockCheck:
         raise argparse.ArgumentTypeError("block check must be 1, 2 or 3") from None
 
 
+_NETCAT_TYPES: dict[str, object] = {
+    "port": SERIAL_PORT,
+    "baud": BAUD,
+    "window": WINDOW,
+    "max_len": ENDPOINT_LENGTH,
+    "delay": DELAY,
+    "dead_after": SECONDS,
+}
+"""Ranges of the netcat options (_netcat.add_arguments declares them with bare int/float)."""
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m serialsocket",
@@ -49,12 +72,14 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     enc = sub.add_parser("encode", help="stdin payload -> wire packets on stdout")
-    enc.add_argument("--type", default="D", help="packet type letter (default D)")
-    enc.add_argument("--seq", type=int, default=0, help="first sequence number, 0..63")
+    enc.add_argument(
+        "--type", type=PacketTypeLetter(), default="D", help="packet type letter (default D)"
+    )
+    enc.add_argument("--seq", type=SEQ, default=0, help="first sequence number, 0..63")
     enc.add_argument("--check", type=_check, default=BlockCheck.CRC16, help="block check 1/2/3")
     enc.add_argument(
         "--max-len",
-        type=int,
+        type=PACKET_LENGTH,
         default=DEFAULT_MAX_PACKET_LENGTH,
         help=f"maximum packet length, MARK through CHECK (default {DEFAULT_MAX_PACKET_LENGTH})",
     )
@@ -69,7 +94,12 @@ def _parser() -> argparse.ArgumentParser:
         default=BlockCheck.SUM6,
         help="block check of S/I packets (1, or 3 for FORCE-3)",
     )
-    dec.add_argument("--max-len", type=int, default=MAX_PACKET_LENGTH)
+    dec.add_argument(
+        "--max-len",
+        type=PACKET_LENGTH,
+        default=MAX_PACKET_LENGTH,
+        help=f"longest packet accepted (default {MAX_PACKET_LENGTH})",
+    )
     dec.add_argument("--profile", choices=sorted(_PROFILES), default="printable")
     dec.add_argument("--hex", action="store_true", help="stdin is hex text, not raw bytes")
     dec.add_argument(
@@ -80,8 +110,10 @@ def _parser() -> argparse.ArgumentParser:
         "listen", help="wait for one connection on PORT; stdin to the link, the link to stdout"
     )
     add_netcat_arguments(lis, listening=True)
+    retype(lis, _NETCAT_TYPES)
     con = sub.add_parser("connect", help="connect over PORT; stdin to the link, the link to stdout")
     add_netcat_arguments(con, listening=False)
+    retype(con, _NETCAT_TYPES | {"connect_timeout": SECONDS})
     ker = sub.add_parser(
         "kermit", help="Kermit file transfer with C-Kermit, G-Kermit or ours (send, receive)"
     )
@@ -173,10 +205,16 @@ def _decode(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the inspector; returns the process exit status."""
     args = _parser().parse_args(argv)
-    if args.command in ("listen", "connect"):
-        return netcat_main(args, listening=args.command == "listen")
-    if args.command == "kermit":
-        return kermit_main(args)
+    try:
+        if args.command in ("listen", "connect"):
+            return netcat_main(args, listening=args.command == "listen")
+        if args.command == "kermit":
+            return kermit_main(args)
+    except ValueError as exc:
+        # A setting the options let through but the port refused when it was
+        # opened (pyserial: a URL's options, a baud the driver cannot set).
+        print(f"serialsocket {args.command}: {exc}: check --port and --baud", file=sys.stderr)
+        return 2
     try:
         if args.command == "encode":
             return _encode(args)

@@ -17,6 +17,7 @@ from dataclasses import asdict
 import trio
 
 from ._checks import BlockCheck
+from ._cliargs import BAUD, KERMIT_LENGTH, KERMIT_TIMEOUT, KERMIT_WINDOW, RETRIES, SERIAL_PORT
 from ._errors import LocalProtocolError
 from ._kermit import KermitStatistics
 from ._kermit_io import KermitTransferError, kermit_receive, kermit_send
@@ -34,26 +35,33 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     recv = sub.add_parser("receive", help="receive files from a Kermit sender")
     recv.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
     for p in (send, recv):
-        p.add_argument("--port", required=True, help="device path, pty or pyserial URL")
-        p.add_argument("--baud", type=int, default=9600, help="line rate (default 9600)")
+        p.add_argument(
+            "--port", type=SERIAL_PORT, required=True, help="device path, pty or pyserial URL"
+        )
+        p.add_argument("--baud", type=BAUD, default=9600, help="line rate (default 9600)")
         p.add_argument(
             "--packet-length",
-            type=int,
+            type=KERMIT_LENGTH,
             default=1000,
             help="longest packet, MARK through CHECK (default 1000; 96 or less = no long packets)",
         )
-        p.add_argument("--window", type=int, default=8, help="window slots, 1..31 (default 8)")
+        p.add_argument(
+            "--window", type=KERMIT_WINDOW, default=8, help="window slots, 1..31 (default 8)"
+        )
         p.add_argument(
             "--check", type=int, choices=(1, 2, 3), default=3, help="block check (default 3)"
         )
         p.add_argument(
             "--timeout",
-            type=float,
+            type=KERMIT_TIMEOUT,
             help="fixed local timeout in seconds (default: what the peer asks for); "
             "on a delayed link set it above the round trip of a full window",
         )
         p.add_argument(
-            "--retries", type=int, default=10, help="retries per packet, 0 = no limit (default 10)"
+            "--retries",
+            type=RETRIES,
+            default=10,
+            help="retries per packet, 0 = no limit (default 10)",
         )
         p.add_argument(
             "--seven-bit", action="store_true", help="7-bit line: require 8th-bit prefixing"

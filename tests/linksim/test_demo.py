@@ -120,7 +120,7 @@ def test_cli_virtual_json_prints_only_the_report() -> None:
     [
         (["--transport", "tcp", "--dial", "5551234"], "--dial needs the serial transport"),
         (["--window", "40"], "window"),
-        (["--preset", "noisy-moon", "--ber", "2"], "byte_error_rate"),
+        (["--preset", "noisy-moon", "--ber", "2"], "argument --ber/--byte-error-rate: must be"),
     ],
 )
 def test_cli_bad_options_exit_2(args: list[str], message: str) -> None:
