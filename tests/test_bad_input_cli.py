@@ -9,16 +9,27 @@ fail during option checking, before any I/O.
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import io
 import pathlib
+import subprocess
 import sys
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
-from linksim import LinkConfig
+from linksim import LinkConfig, _bench_goodput, _soak
 from linksim import _cli as linksim_cli
-from linksim._config import ConfigError
+from linksim import _cliargs as link_args
+from linksim._config import ConfigError, DirectionConfig
+from serialsocket import EndpointConfig
 from serialsocket import _cli as serial_cli
+from serialsocket import _cliargs as serial_args
+from serialsocket._kermit_params import KermitConfig
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def _run(main: object, argv: list[str], stdin: bytes, monkeypatch: pytest.MonkeyPatch) -> int:
@@ -196,3 +207,339 @@ def test_unreadable_config_files_are_config_errors(tmp_path: pathlib.Path) -> No
     for path in (tmp_path / "missing.toml", tmp_path, binary):
         with pytest.raises(ConfigError, match="cannot read"):
             LinkConfig.from_toml(path)
+
+
+# -- the option matrix: every option of every command, generated from the parsers ------------
+#
+# The cases are not written by hand: the parsers are walked (subcommands and
+# all) and each option's ``type=`` says which values lie outside it.  An option
+# whose type the generator does not know fails test_every_option_is_classified
+# until it gets a range-checked converter (linksim/_cliargs.py,
+# serialsocket/_cliargs.py) or a line in FREE_TEXT saying where it is checked.
+
+Main = Callable[[list[str]], int]
+
+COMMANDS: list[tuple[str, Callable[[], argparse.ArgumentParser], Main]] = [
+    ("linksim", linksim_cli.build_parser, linksim_cli.main),
+    ("serialsocket", serial_cli._parser, serial_cli.main),
+    ("soak", _soak.build_parser, _soak.main),
+]
+
+PARSER_MODULES = {
+    # Modules that build an ArgumentParser, and the command above that reaches
+    # their options; a new command line must be added to COMMANDS.
+    "linksim/_cli.py": "linksim",
+    "linksim/_soak.py": "soak",
+    "serialsocket/_cli.py": "serialsocket",
+    # These three build one only under __main__, from the add_arguments that
+    # `linksim bench kermit|latency|pty` use.
+    "linksim/_bench_kermit.py": "linksim",
+    "linksim/_bench_latency.py": "linksim",
+    "linksim/_bench_pty.py": "linksim",
+}
+
+FLAGS = (
+    argparse._HelpAction,
+    argparse._StoreTrueAction,
+    argparse._StoreFalseAction,
+    argparse._StoreConstAction,
+    argparse._AppendConstAction,
+    argparse._CountAction,
+    argparse._VersionAction,
+)
+
+FREE_TEXT = {
+    # dest: where a bad value is caught (the runtime cases below try several)
+    "config": "LinkConfig.from_toml: exit 2 (LINKSIM_CASES)",
+    "world": "WorldConfig.from_toml before anything runs: exit 2",
+    "key_file": "read before anything runs: exit 2",
+    "host": "a name or address: resolved when connecting, exit 1",
+    "dial": "a phone number: the modem answers BUSY/NO CARRIER, exit 1",
+    "busy": "a phone number the emulated modem answers BUSY",
+    "no_answer": "a phone number the emulated modem never answers",
+    "files": "kermit send: each opened before the transfer, exit 2",
+    "directory": "kermit receive: checked before the transfer, exit 2",
+    "log": "a file written (console --log) or read (plot FILE), exit 1 or 2",
+    "out": "plot --out: the PNG written, exit 1",
+    "pairs": "bench kermit: SENDER->RECEIVER checked by main, exit 2",
+    "profile": "bench pty --profile: a file written",
+    "from_json": "bench goodput: a file read",
+    "output": "bench goodput: a file written",
+    "plot": "bench goodput: a PNG written",
+    "plot_delay": "bench goodput: a PNG written",
+    "plot_ber": "bench goodput: a PNG written",
+}
+
+INT_RANGES = (link_args.IntRange, serial_args.IntRange)
+FLOAT_RANGES = (link_args.FloatRange, serial_args.FloatRange)
+PORT_NAMES = (link_args.SerialPortName, serial_args.SerialPortName)
+
+CUSTOM: dict[object, list[str]] = {
+    # Hand-written converters and the values they must refuse.
+    linksim_cli._burst: ["x:y", "0.1", "0.1:0.2:0.3:0.4:0.5", "2:0.5", "nan:0.5", "0.1:inf"],
+    linksim_cli._outage: ["x", "5:1", "-1:2", "1:2:3", "nan:1", "1:inf"],
+    _bench_goodput._length: ["x", "5", "100000", "nan", ""],
+    serial_cli._check: ["0", "4", "x", ""],
+}
+
+
+def _bad_values(action: argparse.Action) -> list[str] | None:
+    """Values the option must refuse; None: the generator does not know its type."""
+    conv = action.type
+    if action.choices is not None:
+        return ["no-such-choice", "", "99"]
+    if isinstance(conv, INT_RANGES):
+        bad = [str(conv.lo - 1), "nan", "inf", "1.5", "x", "", "0x10", "1e3"]
+        if conv.hi is not None:
+            bad += [str(conv.hi + 1), "9" * 40]
+        return bad
+    if isinstance(conv, FLOAT_RANGES):
+        below = conv.lo if conv.lo_open else conv.lo - 1
+        return [repr(below), repr(conv.hi * 2 + 1), "nan", "inf", "-inf", "1e999", "x", ""]
+    if isinstance(conv, PORT_NAMES):
+        return ["", "bogus://x", "nul\0byte"]
+    if isinstance(conv, serial_args.PacketTypeLetter):
+        return ["", "DD", " ", "\x7f"]
+    if conv in CUSTOM:
+        return CUSTOM[conv]
+    if (conv is None or conv is pathlib.Path) and action.dest in FREE_TEXT:
+        return []
+    return None
+
+
+def _good_value(action: argparse.Action) -> str:
+    conv = action.type
+    if action.choices is not None:
+        return str(next(iter(action.choices)))
+    if isinstance(conv, INT_RANGES):
+        return str(conv.lo)
+    if isinstance(conv, FLOAT_RANGES):
+        return repr(conv.hi)
+    if isinstance(conv, PORT_NAMES):
+        return "loop://"
+    return "x"
+
+
+def _walk(
+    parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
+) -> Iterator[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _walk(sub, (*path, name))
+
+
+def _options() -> Iterator[tuple[str, tuple[str, ...], argparse.ArgumentParser, argparse.Action]]:
+    """Every option and positional of every command that takes a value."""
+    for command, build, _ in COMMANDS:
+        for path, parser in _walk(build()):
+            for action in parser._actions:
+                if not isinstance(action, FLAGS) and action.nargs != 0:
+                    yield command, path, parser, action
+
+
+def _argv(
+    path: tuple[str, ...], parser: argparse.ArgumentParser, target: argparse.Action, value: str
+) -> list[str]:
+    """The subcommand path, the required arguments filled with good values, and
+    ``value`` for ``target`` (``--opt=VALUE`` so a leading '-' stays a value)."""
+    if isinstance(target, argparse._SubParsersAction):
+        return [*path, value]
+    options: list[str] = []
+    positionals: list[str] = []
+    for action in parser._actions:
+        if isinstance(action, (*FLAGS, argparse._SubParsersAction)):
+            continue
+        required = action.required or (not action.option_strings and action.nargs not in ("?", "*"))
+        if action is not target and not required:
+            continue
+        given = value if action is target else _good_value(action)
+        if action.option_strings:
+            name = max(action.option_strings, key=len)
+            options.append(f"{name}={given}")
+        else:
+            positionals.append(given)
+    return [*path, *options, *(["--", *positionals] if positionals else [])]
+
+
+class _Accepted(Exception):
+    """parse_args returned: the command would have run."""
+
+
+@pytest.fixture
+def parse_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """main() stops right after parsing: an accepted value never opens or runs anything."""
+    original = argparse.ArgumentParser.parse_args
+
+    def parse_args(self: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> Any:
+        raise _Accepted(original(self, *args, **kwargs))
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", parse_args)
+
+
+def _matrix() -> list[Any]:
+    mains = {command: main for command, _, main in COMMANDS}
+    cases = []
+    for command, path, parser, action in _options():
+        name = argparse._get_action_name(action)
+        for value in _bad_values(action) or []:
+            argv = _argv(path, parser, action, value)
+            case_id = f"{command} {' '.join(path)} {name}={value!r}"
+            cases.append(pytest.param(mains[command], argv, parser.prog, name, id=case_id))
+    return cases
+
+
+MATRIX = _matrix()
+
+
+def test_every_option_is_classified() -> None:
+    unknown = [
+        f"{command} {' '.join(path)} {argparse._get_action_name(action)} (type {action.type!r})"
+        for command, path, _, action in _options()
+        if _bad_values(action) is None
+    ]
+    assert not unknown, (
+        "options with no range-checked converter: give them one from _cliargs.py "
+        "(or, for free text, a FREE_TEXT line saying where it is checked): " + "; ".join(unknown)
+    )
+
+
+def test_every_command_line_is_in_the_matrix() -> None:
+    builders = {
+        str(path.relative_to(ROOT))
+        for package in ("serialsocket", "tcpstream", "linksim")
+        for path in (ROOT / package).rglob("*.py")
+        if "ArgumentParser(" in path.read_text()
+    }
+    assert builders == set(PARSER_MODULES)
+    assert len(MATRIX) > 500  # every option of every command, several values each
+
+
+@pytest.mark.usefixtures("parse_only")
+@pytest.mark.parametrize(("main", "argv", "prog", "name"), MATRIX)
+def test_bad_value_is_one_argparse_error_naming_the_option(
+    main: Main,
+    argv: list[str],
+    prog: str,
+    name: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    try:
+        main(argv)
+    except SystemExit as exc:
+        status = exc.code
+    except _Accepted:
+        pytest.fail(f"{argv} was accepted")
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "Traceback" not in err
+    lines = err.splitlines()
+    assert lines[0].startswith("usage: ")
+    assert all(line.startswith(" ") for line in lines[1:-1]), err  # the usage, then one line
+    last = lines[-1]
+    assert last.startswith(f"{prog}: error: argument {name}: "), err
+    assert len(last) < 400
+
+
+def test_range_edges_and_defaults_are_accepted(parse_only: None) -> None:
+    """The converters are not narrower than the commands: their bounds and every
+    option's default parse (a default outside its own range would be a typo)."""
+    checked = 0
+    for _, _, parser, action in _options():
+        conv = action.type
+        good: list[str] = []
+        if isinstance(conv, INT_RANGES):
+            good = [str(conv.lo)] + ([str(conv.hi)] if conv.hi is not None else [])
+        elif isinstance(conv, FLOAT_RANGES):
+            good = [repr(conv.hi), repr(conv.lo + 1e-9 if conv.lo_open else conv.lo)]
+        if isinstance(conv, (*INT_RANGES, *FLOAT_RANGES)) and isinstance(
+            action.default, int | float
+        ):
+            good.append(repr(action.default))
+        for value in good:
+            argv = _argv((), parser, action, value)
+            try:
+                parser.parse_args(argv)
+            except SystemExit:
+                pytest.fail(f"{parser.prog} {argv} was refused")
+            except _Accepted:
+                checked += 1
+    assert checked > 150
+
+
+def test_converter_bounds_are_what_the_library_takes() -> None:
+    """Each range's ends are accepted by the config the value goes to, and linksim's
+    copy of the converters agrees with serialsocket's."""
+    pairs = [
+        (link_args.WINDOW, serial_args.WINDOW),
+        (link_args.ENDPOINT_LENGTH, serial_args.ENDPOINT_LENGTH),
+        (link_args.KERMIT_LENGTH, serial_args.KERMIT_LENGTH),
+        (link_args.BAUD, serial_args.BAUD),
+    ]
+    for a, b in pairs:
+        assert (a.lo, a.hi) == (b.lo, b.hi)
+    for a, b in [(link_args.DELAY, serial_args.DELAY), (link_args.SECONDS, serial_args.SECONDS)]:
+        assert dataclasses.astuple(a) == dataclasses.astuple(b)
+    length, window = serial_args.ENDPOINT_LENGTH, serial_args.WINDOW
+    for n in (length.lo, length.hi):
+        EndpointConfig(max_packet_length=n, window=window.lo, one_way_delay=serial_args.DELAY.hi)
+    EndpointConfig(window=window.hi, line_rate=serial_args.BAUD.hi)
+    with pytest.raises(serial_cli.LocalProtocolError):
+        EndpointConfig(max_packet_length=length.lo - 1)
+    kermit = serial_args.KERMIT_LENGTH
+    for n in (kermit.lo, kermit.hi):
+        KermitConfig(max_packet_length=n, window=serial_args.KERMIT_WINDOW.hi)
+    KermitConfig(timeout=serial_args.KERMIT_TIMEOUT.hi, retry_limit=serial_args.RETRIES.hi)
+    with pytest.raises(serial_cli.LocalProtocolError):
+        KermitConfig(max_packet_length=kermit.lo - 1)
+    bits = link_args.BITS_PER_CHAR
+    for n in (bits.lo, bits.hi):
+        DirectionConfig(rate=link_args.BIT_RATE.hi, bits_per_char=n, delay=link_args.DELAY.hi)
+
+
+# -- values that look right but fail when used: one line, exit 1 or 2, in a real process -----
+
+RUNTIME_CASES = [
+    # (command line, exit status, words the one line must contain, whether argparse's usage
+    # comes first).  Each run is bounded by a timeout; none starts a server that stays up.
+    (["serialsocket", "connect", "bogus://x"], 2, "argument PORT: unknown URL scheme", True),
+    (["linksim", "arm-server", "--transport", "tcp", "--tcp-port", "99999"], 2, "0..65535", True),
+    (["linksim", "relay", "--duration", "-1"], 2, "argument --duration:", True),
+    (["serialsocket", "connect", "/nonexistent/tty"], 1, "/nonexistent/tty", False),
+    (["serialsocket", "kermit", "receive", "--port", "/nonexistent/tty"], 2, "/nonexistent", False),
+    (
+        ["linksim", "arm-server", "--port", "/nonexistent/tty", "--sessions", "1"],
+        1,
+        "linksim arm-server: [Errno 2] cannot open '/nonexistent/tty'",
+        False,
+    ),
+    (
+        ["linksim", "relay", "--device", "/nonexistent/a", "--device", "/nonexistent/b"],
+        1,
+        "linksim relay: [Errno 2]",
+        False,
+    ),
+    (["linksim", "demo", "--virtual", "--world", "/nonexistent.toml"], 2, "nonexistent", False),
+]
+
+
+@pytest.mark.parametrize(("argv", "status", "words", "usage"), RUNTIME_CASES)
+def test_runtime_failure_is_one_line_not_a_traceback(
+    argv: list[str], status: int, words: str, usage: bool
+) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", *argv],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == status, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    if usage:
+        assert lines[0].startswith("usage: ")
+        lines = [line for line in lines if not line.startswith(("usage: ", " "))]
+    assert len(lines) == 1, done.stderr
+    assert words in lines[0]
