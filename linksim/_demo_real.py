@@ -14,6 +14,7 @@ file), so every demo run also exercises the authenticated handshake.
 
 from __future__ import annotations
 
+import contextvars
 import json
 import os
 import secrets
@@ -112,6 +113,7 @@ async def run_real(options: DemoOptions) -> DemoReport:
     """The real-time demo over ptys (serial) or loopback (tcp)."""
     key = options.key if options.key is not None else secrets.token_bytes(32)
     start = trio.current_time()
+    _START.set(start)
     holder: dict[str, Any] = {}
     error: str | None = None
     try:
@@ -157,14 +159,32 @@ def _line_figures(stats: RelayStatistics) -> dict[str, Any]:
     return out
 
 
+def _say(options: DemoOptions, message: str) -> None:
+    """A status line on stderr while nothing else shows (connecting, closing).
+
+    Without these the real-time demo sat silent for its first ~11 s (relay,
+    arm server, serial connect and handshake over a slow line) and its last
+    ~9 s (closing waits for the final acknowledgements).
+    """
+    if options.progress:
+        print(f"[{trio.current_time() - _START.get():7.2f} s] {message}", file=sys.stderr)
+
+
+_START: contextvars.ContextVar[float] = contextvars.ContextVar("demo_start", default=0.0)
+
+
 async def _tcp(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> None:
+    _say(options, "starting the arm server (loopback TCP)")
     async with arm_server_process(["--transport", "tcp", "--tcp-port", "0"], key) as info:
         port = int(info["tcp_port"])
+        _say(options, f"arm server listening on port {port}; connecting and authenticating")
         async with connect_tcp("127.0.0.1", port, identity=IDENTITY, key=key) as client:
             holder["run"] = run = new_run(options)
             probe = lambda: client_link_figures(client)  # noqa: E731
             await drive(client, run, options, probe, run_title(options, "loopback"))
             holder["figures"] = client_link_figures(client)
+            _say(options, "closing the session")
+        _say(options, "session closed; waiting for the arm server to exit")
 
 
 async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> None:
@@ -175,7 +195,9 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
     modems = ModemPair(ModemConfig(connect_rate=baud)) if options.dial else None
     stop = trio.Event()
     async with trio.open_nursery() as nursery:
+        _say(options, "starting the impaired relay between two ptys")
         a, b = await nursery.start(_relay, link, modems, stop, holder)
+        _say(options, f"relay up ({a} <-> {b}); starting the arm server on {b}")
         server_args = ["--transport", "serial", "--port", b, "--baud", str(baud)]
         server_args += ["--delay", f"{link.a_to_b.delay + link.a_to_b.jitter:g}"]
         if options.window is not None:
@@ -188,10 +210,14 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
             async with arm_server_process(server_args, key):
                 port = await serialsocket.open_port(a, baud)
                 if options.dial:
+                    _say(options, f"arm server ready; dialing {options.dial}")
                     connection = await serialsocket.dial(port, options.dial)
-                    if options.progress:
-                        print(f"dialed {options.dial}: {connection}", file=sys.stderr)
+                    _say(options, f"dialed {options.dial}: {connection}")
+                _say(options, f"connecting the serial socket on {a} at {baud} bit/s")
                 sock = await serialsocket.connect(port, endpoint)
+                rtt = sock.statistics().link.smoothed_rtt
+                measured = f" (round trip {rtt:.2f} s)" if rtt is not None else ""
+                _say(options, f"serial link up{measured}; authenticating")
                 try:
                     async with connect_stream(sock, identity=IDENTITY, key=key) as client:
                         holder["run"] = run = new_run(options)
@@ -203,10 +229,13 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
                             run_title(options, "real time, ptys"),
                         )
                         holder["figures"] = client_link_figures(client) | serial_link_figures(sock)
+                        _say(options, "closing the session")
                 finally:
+                    _say(options, "closing the serial link (waiting for the last acknowledgements)")
                     with trio.move_on_after(endpoint.derived_dead_after()) as s:
                         s.shield = True
                         await sock.aclose()
+                    _say(options, "serial link closed")
         finally:
             stop.set()
 

@@ -140,6 +140,15 @@ def test_real_time_demo_over_ptys_through_the_relay() -> None:
     assert report["virtual"] is False
     line = report["link"]["line"]
     assert line["controller_to_arm"]["bytes_delivered"] > 0
+    # Never silent while connecting or closing (status lines on stderr).
+    for status in (
+        "starting the impaired relay",
+        "connecting the serial socket",
+        "authenticating",
+        "closing the serial link",
+        "serial link closed",
+    ):
+        assert status in done.stderr, done.stderr
     assert line["arm_to_controller"]["bytes_corrupted"] >= 0
 
 
@@ -150,6 +159,8 @@ def test_real_time_demo_over_tcp() -> None:
     report = json.loads(done.stdout)
     assert_task_done(report)
     assert report["transport"] == "tcp"
+    assert "connecting and authenticating" in done.stderr
+    assert "session closed" in done.stderr
 
 
 @pytest.mark.slow
