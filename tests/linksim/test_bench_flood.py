@@ -41,4 +41,4 @@ def test_bench_flood_rejects_nonsense() -> None:
         timeout=60,
     )
     assert out.returncode == 2
-    assert b"--limit >= 0" in out.stderr
+    assert b"argument --limit: must be a number of packets a second in [0, 1000000]" in out.stderr

@@ -31,8 +31,12 @@ def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
 def test_bench_pty_rejects_bad_sizes(capsys: pytest.CaptureFixture[str]) -> None:
     ap = argparse.ArgumentParser()
     _bench_pty.add_arguments(ap)
-    assert _bench_pty.main(ap.parse_args(["--size", "0"])) == 2
-    assert "--size and --runs must be >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        ap.parse_args(["--size", "0"])
+    assert info.value.code == 2
+    assert "argument --size: must be an integer in 1..17179869184, got '0'" in (
+        capsys.readouterr().err
+    )
 
 
 def test_linksim_bench_pty_command() -> None:

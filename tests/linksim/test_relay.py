@@ -203,4 +203,4 @@ def test_cli_relay_rejects_bad_values() -> None:
         timeout=LIMIT,
     )
     assert out.returncode == 2
-    assert "loss must be a probability in [0, 1]" in out.stderr
+    assert "argument --loss: must be a number in [0, 1], got '1.5'" in out.stderr

@@ -113,7 +113,7 @@ def test_errors_are_reported_with_exit_status() -> None:
         cli("connect", "loop://", "--window", "40"), capture_output=True, timeout=GUARD
     )
     assert bad.returncode == 2
-    assert b"window=40: must be 1..31" in bad.stderr
+    assert b"argument --window: must be an integer in 1..31, got '40'" in bad.stderr
 
 
 def test_dial_and_answer_through_emulated_modems() -> None:
