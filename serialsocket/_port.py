@@ -496,6 +496,13 @@ async def open_port(
             thread_io=thread_io,
             exclusive=exclusive,
         )
+    except (KeyError, TypeError) as exc:
+        # pyserial parses a URL's ?options while opening and lets a bad one
+        # escape as KeyError ('loop://?logging=nope').
+        raise ValueError(
+            f"bad option in {path_or_url!r}: {exc}; see pyserial's URL handlers for what "
+            "each scheme accepts"
+        ) from exc
     except serial.SerialException as exc:
         # pyserial's text repeats the errno and the path; say each once.
         why = os.strerror(exc.errno) if exc.errno else str(exc)
