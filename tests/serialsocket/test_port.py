@@ -279,7 +279,7 @@ def test_an_open_error_names_the_errno_once() -> None:
 
 def test_a_bad_url_option_is_a_value_error_not_a_key_error() -> None:
     async def main() -> None:
-        with pytest.raises(ValueError, match="bad option in 'loop://.logging=nope'"):
+        with pytest.raises(ValueError, match=r"bad option in 'loop://\?logging=nope'"):
             await open_port("loop://?logging=nope")
 
     run(main)
