@@ -20,6 +20,16 @@ Kermit file transfer on the same packet layer: :class:`KermitSender` and
 (``python -m serialsocket kermit send|receive``; serialsocket/KERMIT.md).
 """
 
+from importlib.metadata import PackageNotFoundError as _NotInstalled
+from importlib.metadata import version as _version
+
+try:
+    __version__ = _version("telelink")
+    """The telelink distribution's version (pyproject.toml is the one source)."""
+except _NotInstalled:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
+
+
 from ._blocking import BlockingSerialSocket as BlockingSerialSocket
 from ._checks import BlockCheck as BlockCheck
 from ._checks import check_chars as check_chars

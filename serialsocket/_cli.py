@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 
+from . import __version__
 from ._checks import BlockCheck
 from ._cliargs import (
     BAUD,
@@ -63,12 +65,25 @@ _NETCAT_TYPES: dict[str, object] = {
 """Ranges of the netcat options (_netcat.add_arguments declares them with bare int/float)."""
 
 
+def _prog() -> str:
+    """How the user ran us: ``serialsocket`` (the script) or ``python -m serialsocket``."""
+    name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    return "python -m serialsocket" if name in ("", "__main__.py", "-c") else name
+
+
 def _parser() -> argparse.ArgumentParser:
+    """The whole command line (the bad-input matrix test walks it)."""
+    return _build()[0]
+
+
+def _build() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    """The top-level parser and each subcommand's (for errors in the right usage)."""
     ap = argparse.ArgumentParser(
-        prog="python -m serialsocket",
+        prog=_prog(),
         description="Serial sockets: a netcat over a serial line (listen, connect), the "
         "Kermit packet inspector (encode, decode) and Kermit file transfer (kermit).",
     )
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     enc = sub.add_parser("encode", help="stdin payload -> wire packets on stdout")
@@ -105,6 +120,12 @@ def _parser() -> argparse.ArgumentParser:
     dec.add_argument(
         "--raw", action="store_true", help="write the decoded payloads to stdout instead of JSON"
     )
+    dec.add_argument(
+        "file",
+        nargs="?",
+        default="-",
+        help="the wire bytes to read (default: - for stdin); exit 1 if anything was rejected",
+    )
 
     lis = sub.add_parser(
         "listen", help="wait for one connection on PORT; stdin to the link, the link to stdout"
@@ -118,11 +139,24 @@ def _parser() -> argparse.ArgumentParser:
         "kermit", help="Kermit file transfer with C-Kermit, G-Kermit or ours (send, receive)"
     )
     add_kermit_arguments(ker)
-    return ap
+    return ap, {"encode": enc, "decode": dec, "listen": lis, "connect": con, "kermit": ker}
 
 
-def _read_stdin() -> bytes:
-    data = sys.stdin.buffer.read(_READ_LIMIT + 1)
+def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
+    """Parse; an unknown option is reported with its subcommand's usage, not the top one's."""
+    ap, subs = _build()
+    args, extra = ap.parse_known_args(argv)
+    if extra:
+        subs[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
+def _read_stdin(path: str = "-") -> bytes:
+    if path == "-":
+        data = sys.stdin.buffer.read(_READ_LIMIT + 1)
+    else:
+        with open(path, "rb") as f:
+            data = f.read(_READ_LIMIT + 1)
     if len(data) > _READ_LIMIT:
         raise LocalProtocolError(f"input larger than {_READ_LIMIT} bytes: split it")
     return data
@@ -148,7 +182,8 @@ def _encode(args: argparse.Namespace) -> int:
 
 
 def _decode(args: argparse.Namespace) -> int:
-    data = _read_stdin()
+    """Exit 0 if every byte was part of a good packet, 1 if anything was rejected."""
+    data = _read_stdin(args.file)
     if args.hex:
         try:
             data = bytes.fromhex(data.decode("ascii", "replace").replace("\n", " "))
@@ -199,12 +234,14 @@ def _decode(args: argparse.Namespace) -> int:
             out.write(json.dumps(leftover) + "\n")
         bad += 1
     out.flush()
-    return 1 if bad and args.raw else 0
+    if bad:
+        print(f"serialsocket decode: {bad} rejected (see the JSON records)", file=sys.stderr)
+    return 1 if bad else 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the inspector; returns the process exit status."""
-    args = _parser().parse_args(argv)
+    args = _parse(argv)
     try:
         if args.command in ("listen", "connect"):
             return netcat_main(args, listening=args.command == "listen")
@@ -221,4 +258,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _decode(args)
     except LocalProtocolError as exc:
         print(f"serialsocket: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"serialsocket {args.command}: {exc.strerror or exc}: {args.file}", file=sys.stderr)
         return 2

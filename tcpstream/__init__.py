@@ -17,6 +17,16 @@ and the session are specified byte by byte in ``tcpstream/PROTOCOL.md``.
   :func:`decode_packet`) and the state table (:data:`TRANSITIONS`).
 """
 
+from importlib.metadata import PackageNotFoundError as _NotInstalled
+from importlib.metadata import version as _version
+
+try:
+    __version__ = _version("telelink")
+    """The telelink distribution's version (pyproject.toml is the one source)."""
+except _NotInstalled:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
+
+
 from . import _builders as commands
 from ._api import DEFAULT_PORT, connect_stream, connect_tcp, serve_stream, serve_tcp
 from ._blocking import BlockingClient, WatchdogExpired

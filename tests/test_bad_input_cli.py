@@ -113,10 +113,12 @@ def test_serialsocket_decode_reports_garbage_as_records_not_errors(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     status = _run(serial_cli.main, ["decode"], b"\x01garbage\x01#\x00" * 100, monkeypatch)
-    out = capsys.readouterr().out.splitlines()
-    assert status == 0
+    captured = capsys.readouterr()
+    out = captured.out.splitlines()
+    assert status == 1  # records, not a traceback; but not "everything decoded" either
     assert len(out) == 200  # one record per damaged packet (two MARKs per copy)
     assert all('"rejected"' in line for line in out)
+    assert "200 rejected" in captured.err
 
 
 def test_serialsocket_decode_refuses_oversized_input(
@@ -258,6 +260,7 @@ FREE_TEXT = {
     "busy": "a phone number the emulated modem answers BUSY",
     "no_answer": "a phone number the emulated modem never answers",
     "files": "kermit send: each opened before the transfer, exit 2",
+    "file": "serialsocket decode FILE (- for stdin): opened first, exit 2",
     "directory": "kermit receive: checked before the transfer, exit 2",
     "log": "a file written (console --log) or read (plot FILE), exit 1 or 2",
     "out": "plot --out: the PNG written, exit 1",

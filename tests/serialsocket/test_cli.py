@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import json
+import pathlib
 import random
 import subprocess
 import sys
 
 import pytest
+
+from serialsocket import __version__
 
 
 def run(args: list[str], data: bytes) -> subprocess.CompletedProcess[bytes]:
@@ -63,3 +66,38 @@ def test_bad_arguments_give_clear_errors() -> None:
     out = run(["encode", "--check", "7"], b"x")
     assert out.returncode == 2
     assert b"block check must be 1, 2 or 3" in out.stderr
+
+
+def test_decode_exit_status_says_whether_anything_was_rejected(tmp_path: pathlib.Path) -> None:
+    wire = run(["encode"], b"clean").stdout
+    clean = run(["decode"], wire)
+    assert clean.returncode == 0, clean.stderr
+    noisy = run(["decode"], b"junk" + wire)
+    assert noisy.returncode == 1
+    assert b"1 rejected" in noisy.stderr
+    # A file instead of stdin, and "-" for stdin.
+    path = tmp_path / "capture.bin"
+    path.write_bytes(wire)
+    from_file = run(["decode", "--raw", str(path)], b"")
+    assert (from_file.returncode, from_file.stdout) == (0, b"clean")
+    assert run(["decode", "--raw", "-"], wire).stdout == b"clean"
+    missing = run(["decode", str(tmp_path / "nope")], b"")
+    assert missing.returncode == 2
+    assert b"No such file" in missing.stderr
+
+
+def test_version_and_the_name_the_user_typed() -> None:
+    assert __version__ not in ("", "0+unknown")
+    as_module = run(["--version"], b"")
+    assert as_module.stdout.decode().strip() == f"python -m serialsocket {__version__}"
+    script = pathlib.Path(sys.executable).with_name("serialsocket")
+    as_script = subprocess.run([str(script), "--version"], capture_output=True, timeout=60)
+    assert as_script.stdout.decode().strip() == f"serialsocket {__version__}"
+
+
+def test_an_unknown_option_shows_the_subcommands_usage() -> None:
+    done = run(["decode", "--bogus"], b"")
+    assert done.returncode == 2
+    err = done.stderr.decode()
+    assert err.startswith("usage: python -m serialsocket decode ")
+    assert "error: unrecognized arguments: --bogus" in err
