@@ -22,19 +22,24 @@ from __future__ import annotations
 
 import logging
 import secrets
-from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Unpack
 
 import trio
 
-from . import _builders as build
 from ._client_connection import ClientConnection
+from ._client_core import (
+    FINAL_REASONS,
+    CommandMethods,
+    RequestBook,
+    Settlement,
+    describe_error,
+    is_emergency,
+)
 from ._commands import (
     Command,
-    CommandCode,
-    CommandFailed,
     CommandResult,
     Feedback,
     validate_arguments,
@@ -43,7 +48,6 @@ from ._connection import ConnectionStatistics
 from ._errors import (
     AuthenticationFailed,
     LocalProtocolError,
-    OutcomeUnknown,
     Refused,
     SessionClosed,
 )
@@ -76,19 +80,6 @@ StreamFactory = Callable[[], Awaitable[trio.abc.Stream]]
 TELEMETRY_BUFFER = 16
 """Telemetry samples buffered per subscriber; a slower reader loses the newest
 (counted) rather than making the connection wait."""
-
-_FINAL_REASONS = frozenset(
-    {
-        CloseReason.NORMAL,
-        CloseReason.TERMINATED,
-        CloseReason.REFUSED,
-        CloseReason.AUTHENTICATION,
-        CloseReason.SHUTDOWN,
-        CloseReason.TAKEN_OVER,
-        CloseReason.IDLE,
-    }
-)
-"""Session ends after which reconnecting would be wrong."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -162,7 +153,7 @@ class CommandHandle:
         self._done.set()
 
 
-class ArmClient:
+class ArmClient(CommandMethods):
     """A controller (or observer) connection to an arm.  Use ``async with``.
 
     Prefer :func:`connect_tcp` / :func:`connect_stream` to building one.
@@ -199,7 +190,9 @@ class ArmClient:
         # In-flight commands, bounded like the arm's queue: submit() waits for room.
         self._slots = trio.Semaphore(max_in_flight)
         self._pending: dict[int, CommandHandle] = {}
-        self._next_id = 1
+        # Request ids, the failure barrier and the resume decision (sans-I/O,
+        # shared with the asyncio client).
+        self._book = RequestBook()
         self._pump: Pump | None = None
         self._conn: ClientConnection | None = None
         self._ready = trio.Event()
@@ -210,19 +203,11 @@ class ArmClient:
         self._failure: Exception | None = None
         self._ending = False
         self._granted_now = False
-        self._arm_instance: int | None = None
-        # The highest request id the arm has confirmed taking in (ACCEPTED or
-        # COMPLETED): a GRANT reporting less means the arm's memory was lost.
-        self._confirmed_highest = 0
-        # The highest request id of a FAILED reply received: sent with every
-        # command so the arm can tell what we knew (the failure barrier).
-        self._failures_seen = 0
         self._subscribers: set[trio.MemorySendChannel[Feedback]] = set()
         self.parameters: SessionParameters | None = None
         self.latest_telemetry: Feedback | None = None
         self.reconnects = 0
         self.telemetry_dropped = 0
-        self.rejected_by_arm = 0
         self._nursery: trio.Nursery | None = None
         self._loop_scope: trio.CancelScope | None = None
         self._stopping = False
@@ -348,7 +333,7 @@ class ArmClient:
             stream = await self._factory()
         except (OSError, trio.BrokenResourceError) as exc:
             # Connection refused, no route, a TLS certificate the client does not trust...
-            self._failure = SessionClosed(f"cannot reach the arm: {_describe(exc)}")
+            self._failure = SessionClosed(f"cannot reach the arm: {describe_error(exc)}")
             self._failure.__cause__ = exc
             self._closed.set()
             return
@@ -367,7 +352,7 @@ class ArmClient:
                 granted_once = granted_once or self._granted_now
                 if self._granted_now:
                     used = 0
-                if not granted_once or self._ending or ended.reason in _FINAL_REASONS:
+                if not granted_once or self._ending or ended.reason in FINAL_REASONS:
                     if self._failure is None and not granted_once:
                         self._failure = SessionClosed(f"no session: {ended.message}", ended.reason)
                     break
@@ -379,7 +364,7 @@ class ArmClient:
                     try:
                         next_stream = await self._factory()
                     except (OSError, trio.BrokenResourceError) as exc:
-                        last_error = _describe(exc)
+                        last_error = describe_error(exc)
                         log.info("reconnect attempt %d failed: %s", used, last_error)
                 if next_stream is None:
                     if self._reconnect_attempts == 0:
@@ -423,30 +408,15 @@ class ArmClient:
         if pump.stream_error is not None:
             # "the stream ended without a BYE" says little; the stream's own
             # error says why (a dead serial link with its byte counts, a reset).
-            why = f"{end.message}: {_describe(pump.stream_error)}"
+            why = f"{end.message}: {describe_error(pump.stream_error)}"
             end = SessionEnded(end.reason, why, end.by_peer)
         return end
 
     # --- events -----------------------------------------------------------------
 
     def _on_event(self, event: Event, ended: list[SessionEnded]) -> None:
-        if isinstance(event, Completed):
-            self._confirmed_highest = max(self._confirmed_highest, event.request_id)
-            self._resolve(event.request_id, event.result, None)
-        elif isinstance(event, Accepted):
-            self._confirmed_highest = max(self._confirmed_highest, event.request_id)
-            handle = self._pending.get(event.request_id)
-            if handle is not None:
-                handle._accept(event.position)
-        elif isinstance(event, Failed):
-            # The failure barrier: commands sent from now on say we know of it.
-            self._failures_seen = max(self._failures_seen, event.request_id)
-            if event.request_id in self._pending:
-                error = CommandFailed(event.reason, event.message, event.aux)
-                self._resolve(event.request_id, None, error)
-            else:
-                self.rejected_by_arm += 1
-                log.warning("the arm rejected a packet: %s %s", event.reason.name, event.message)
+        if isinstance(event, Completed | Accepted | Failed):
+            self._deliver(self._book.on_event(event))
         elif isinstance(event, TelemetryReceived):
             self._telemetry(event.feedback)
         elif isinstance(event, Granted):
@@ -478,55 +448,40 @@ class ArmClient:
         assert pump is not None
         assert conn is not None
         now = trio.current_time()
-        # Resume.  If the arm forgot us -- it restarted (new instance), or no
-        # longer remembers ids it confirmed -- every command we sent without
-        # seeing its outcome may or may not have run there: report that rather
-        # than risk running one twice.  Otherwise re-send them all, oldest first,
-        # under the same ids: the arm answers from memory, attaches to the one
-        # running, or (above its highest id) runs what it never received.
-        forgot = (
-            not event.remembered
-            or event.last_request_id < self._confirmed_highest
-            or (self._arm_instance is not None and event.arm_instance != self._arm_instance)
-        )
-        self._arm_instance = event.arm_instance
-        if forgot:
-            self._confirmed_highest = event.last_request_id
-        for rid in sorted(self._pending):
-            handle = self._pending[rid]
-            if not handle.sent:
-                continue
-            if forgot:
-                unknown = (
-                    f"request {rid}: the arm restarted or forgot this controller, so it "
-                    "cannot say whether the command ran; outcome unknown (not re-sent). "
-                    "Check the arm's state before commanding again"
-                )
-                self._resolve(rid, None, OutcomeUnknown(unknown))
-                continue
-            conn.send_command(rid, handle.command, now, failures_seen=handle.failures_seen)
+        resend, unknown = self._book.on_grant(event)
+        self._deliver(unknown)
+        for rid, command, failures_seen in resend:
+            conn.send_command(rid, command, now, failures_seen=failures_seen)
         pump.kick()
         self._ready.set()
         self._notify()
 
-    def _resolve(
-        self, request_id: int, result: CommandResult | None, error: Exception | None
-    ) -> None:
-        handle = self._pending.pop(request_id, None)
-        if handle is None:
-            return
-        handle._finish(result, error)
-        if handle.command.code is not CommandCode.EMERGENCY_STOP:
-            self._slots.release()
+    def _deliver(self, settlements: list[Settlement]) -> None:
+        """Hand what the book decided to the waiting handles."""
+        for s in settlements:
+            handle = self._pending.get(s.request_id)
+            if handle is None:
+                continue
+            if not s.final:
+                assert s.position is not None
+                handle._accept(s.position)
+                continue
+            del self._pending[s.request_id]
+            handle._finish(s.result, s.error)
+            if not is_emergency(handle.command):
+                self._slots.release()
 
     def _fail_pending(self, error: SessionClosed) -> None:
         """Settle every pending command: a command already sent may have run, so
-        it ends :class:`OutcomeUnknown`; one never sent ends with ``error``."""
-        for rid in sorted(self._pending):
-            sent = self._pending[rid].sent
-            unknown = OutcomeUnknown(f"request {rid} was sent, but {error}: outcome unknown")
-            unknown.reason = error.reason
-            self._resolve(rid, None, unknown if sent else error)
+        it ends :class:`OutcomeUnknown` (the book decides); none is left waiting."""
+        self._deliver(self._book.settle_all(error))
+        for rid in sorted(self._pending):  # never sent (none today: see submit)
+            self._deliver([Settlement(rid, error=error)])
+
+    @property
+    def rejected_by_arm(self) -> int:
+        """FAILED replies matching no command: packets the arm could not use."""
+        return self._book.rejected_by_arm
 
     def _telemetry(self, feedback: Feedback) -> None:
         self.latest_telemetry = feedback
@@ -549,7 +504,7 @@ class ArmClient:
         if self.role is not Role.CONTROLLER:
             raise LocalProtocolError("an observer cannot command the arm")
         validate_arguments(command)
-        if command.code is not CommandCode.EMERGENCY_STOP:
+        if not is_emergency(command):
             await self._slots.acquire()
         try:
             # Bounded: the reconnect loop ends in a grant or in _closed.
@@ -560,21 +515,18 @@ class ArmClient:
                         "or reconnect with this one's identity to resume)"
                     )
                 await self._changed.wait()
-            if self._next_id >= 2**32:
-                raise LocalProtocolError("request ids exhausted; create a new client")
+            rid, failures_seen = self._book.register(command)
         except BaseException:
-            if command.code is not CommandCode.EMERGENCY_STOP:
+            if not is_emergency(command):
                 self._slots.release()
             raise
-        rid = self._next_id
-        self._next_id += 1
         handle = CommandHandle(rid, command)
+        handle.failures_seen = failures_seen
         self._pending[rid] = handle
         pump, conn = self._pump, self._conn
         assert pump is not None
         assert conn is not None
-        handle.failures_seen = self._failures_seen
-        conn.send_command(rid, command, trio.current_time(), failures_seen=handle.failures_seen)
+        conn.send_command(rid, command, trio.current_time(), failures_seen=failures_seen)
         handle.sent = True
         pump.kick()
         return handle
@@ -607,89 +559,6 @@ class ArmClient:
             bytes_received=pump.bytes_in if pump is not None else 0,
             connection=pump.conn.statistics() if pump is not None else None,
         )
-
-    # --- one method per command -------------------------------------------------
-
-    async def reinitialize(self) -> CommandResult:
-        return await self.send(build.reinitialize())
-
-    async def status(self) -> CommandResult:
-        return await self.send(build.status())
-
-    async def open_fingers(self, opening: float = 0.0) -> CommandResult:
-        return await self.send(build.open_fingers(opening))
-
-    async def close_fingers(self) -> CommandResult:
-        return await self.send(build.close_fingers())
-
-    async def move_to(
-        self,
-        p: Sequence[float],
-        s: Sequence[float] | None = None,
-        a: Sequence[float] | None = None,
-    ) -> CommandResult:
-        return await self.send(build.move_to(p, s, a))
-
-    async def move_joints(self, joints: Sequence[float]) -> CommandResult:
-        return await self.send(build.move_joints(joints))
-
-    async def move_joint(self, joint: int, amount: float) -> CommandResult:
-        return await self.send(build.move_joint(joint, amount))
-
-    async def transform_to_pose(self, joints: Sequence[float]) -> CommandResult:
-        return await self.send(build.transform_to_pose(joints))
-
-    async def transform_to_joints(
-        self, p: Sequence[float], s: Sequence[float], a: Sequence[float]
-    ) -> CommandResult:
-        return await self.send(build.transform_to_joints(p, s, a))
-
-    async def squeeze(self, force: float) -> CommandResult:
-        return await self.send(build.squeeze(force))
-
-    async def weigh(self) -> CommandResult:
-        return await self.send(build.weigh())
-
-    async def change_speed(self, fraction: float) -> CommandResult:
-        return await self.send(build.change_speed(fraction))
-
-    async def center_fingers(self) -> CommandResult:
-        return await self.send(build.center_fingers())
-
-    async def terminate(self) -> CommandResult:
-        return await self.send(build.terminate())
-
-    async def move_delta(
-        self,
-        dp: Sequence[float],
-        drot: Sequence[float] = (0.0, 0.0, 0.0),
-        *,
-        pose_change: bool = False,
-    ) -> CommandResult:
-        return await self.send(build.move_delta(dp, drot, pose_change=pose_change))
-
-    async def move_path(
-        self, points: Sequence[Sequence[float]], blend: float = 0.0
-    ) -> CommandResult:
-        return await self.send(build.move_path(points, blend))
-
-    async def emergency_stop(self) -> CommandResult:
-        """Halt now: bypasses the in-flight bound here and the queue at the arm."""
-        return await self.send(build.emergency_stop())
-
-    async def add_obstacle(
-        self, minimum: Sequence[float], maximum: Sequence[float]
-    ) -> CommandResult:
-        return await self.send(build.add_obstacle(minimum, maximum))
-
-
-def _describe(exc: BaseException) -> str:
-    """One line for an error: its text, and its cause's when that adds something."""
-    text = str(exc) or type(exc).__name__
-    cause = exc.__cause__
-    if cause is not None and str(cause) and str(cause) not in text:
-        text += f" ({type(cause).__name__}: {cause})"
-    return text
 
 
 async def _set_when(event: trio.Event, scope: trio.CancelScope) -> None:
