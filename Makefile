@@ -1,22 +1,28 @@
 # The README's two commands are `make demo` and `make test`. Each does its own
-# set-up on a fresh machine: it creates .venv and installs the project with its
-# test and dev extras the first time (and again when pyproject.toml changes).
+# set-up on a fresh machine: it creates .venv and installs the project the
+# first time (and again when pyproject.toml changes) -- the demo with no
+# extras at all, the tests with their test, dev and plot extras.
 
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
+RUN_STAMP := $(VENV)/.installed-run-stamp
 PKGS   := serialsocket tcpstream linksim
 
 .PHONY: demo test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
 
-$(STAMP): pyproject.toml
+$(RUN_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e .
+	touch $(RUN_STAMP)
+
+$(STAMP): $(RUN_STAMP)
 	$(PY) -m pip install --quiet -e '.[test,dev,plot]'
 	touch $(STAMP)
 
-demo: $(STAMP)
+demo: $(RUN_STAMP)
 	$(PY) -m linksim demo $(ARGS)
 
 test: lint typecheck pytest
