@@ -240,7 +240,19 @@ def _decode(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the inspector; returns the process exit status."""
+    """Run a command; returns the process exit status."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # Whoever read our stdout went away (``| head``): stop quietly, as cat
+        # does, with the status a shell gives for SIGPIPE.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = _parse(argv)
     try:
         if args.command in ("listen", "connect"):
@@ -259,6 +271,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LocalProtocolError as exc:
         print(f"serialsocket: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        raise
     except OSError as exc:
         print(f"serialsocket {args.command}: {exc.strerror or exc}: {args.file}", file=sys.stderr)
         return 2

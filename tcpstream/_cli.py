@@ -206,6 +206,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return _decode(args)
+    except BrokenPipeError:
+        # Whoever read our stdout went away (``| head``): stop quietly, as cat
+        # does, with the status a shell gives for SIGPIPE.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
     except (OSError, ValueError) as exc:
         if isinstance(exc, OSError) and exc.strerror:
             text = f"{exc.strerror}: {exc.filename}"

@@ -101,3 +101,23 @@ def test_an_unknown_option_shows_the_subcommands_usage() -> None:
     err = done.stderr.decode()
     assert err.startswith("usage: python -m serialsocket decode ")
     assert "error: unrecognized arguments: --bogus" in err
+
+
+def test_a_closed_pipe_on_stdout_ends_quietly() -> None:
+    """``serialsocket decode | head -1``: no BrokenPipeError traceback."""
+    payload = random.Random(9).randbytes(200_000)
+    wire = run(["encode"], payload).stdout
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "serialsocket", "decode"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None
+    assert proc.stdin is not None
+    proc.stdout.close()  # the reader is gone before anything is written
+    proc.stdin.write(wire)
+    proc.stdin.close()
+    assert proc.wait(timeout=60) == 141
+    assert proc.stderr is not None
+    assert b"Traceback" not in proc.stderr.read()

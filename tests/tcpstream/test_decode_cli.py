@@ -96,3 +96,19 @@ def test_runs_as_a_module_and_says_its_version() -> None:
         [sys.executable, "-m", "tcpstream", "--version"], capture_output=True, timeout=60
     )
     assert done.stdout.decode().strip() == f"python -m tcpstream {__version__}"
+
+
+def test_a_closed_pipe_on_stdout_ends_quietly(tmp_path: pathlib.Path) -> None:
+    a, _ = _captures(tmp_path)
+    big = tmp_path / "big.bin"
+    big.write_bytes(a.read_bytes() * 300)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tcpstream", "decode", str(big)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()
+    assert proc.wait(timeout=60) == 141
+    assert proc.stderr is not None
+    assert b"Traceback" not in proc.stderr.read()
