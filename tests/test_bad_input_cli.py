@@ -28,6 +28,7 @@ from serialsocket import EndpointConfig
 from serialsocket import _cli as serial_cli
 from serialsocket import _cliargs as serial_args
 from serialsocket._kermit_params import KermitConfig
+from tcpstream import _cli as tcp_cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -224,6 +225,7 @@ Main = Callable[[list[str]], int]
 COMMANDS: list[tuple[str, Callable[[], argparse.ArgumentParser], Main]] = [
     ("linksim", linksim_cli.build_parser, linksim_cli.main),
     ("serialsocket", serial_cli._parser, serial_cli.main),
+    ("tcpstream", tcp_cli._parser, tcp_cli.main),
     ("soak", _soak.build_parser, _soak.main),
 ]
 
@@ -233,6 +235,7 @@ PARSER_MODULES = {
     "linksim/_cli.py": "linksim",
     "linksim/_soak.py": "soak",
     "serialsocket/_cli.py": "serialsocket",
+    "tcpstream/_cli.py": "tcpstream",
     # These three build one only under __main__, from the add_arguments that
     # `linksim bench kermit|latency|pty` use.
     "linksim/_bench_kermit.py": "linksim",
@@ -261,6 +264,7 @@ FREE_TEXT = {
     "no_answer": "a phone number the emulated modem never answers",
     "files": "kermit send: each opened before the transfer, exit 2",
     "file": "serialsocket decode FILE (- for stdin): opened first, exit 2",
+    "key": "tcpstream decode --key HEX: checked before reading, exit 2",
     "directory": "kermit receive: checked before the transfer, exit 2",
     "log": "a file written (console --log) or read (plot FILE), exit 1 or 2",
     "out": "plot --out: the PNG written, exit 1",
