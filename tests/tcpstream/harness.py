@@ -63,3 +63,31 @@ async def wired(executor: Any, config: ServerConfig | None = None) -> AsyncItera
         wiring = Wiring(server, nursery)
         yield wiring
         nursery.cancel_scope.cancel()
+
+
+class SlowStream(trio.abc.Stream):
+    """A client-side stream whose sends and close take some (virtual) time, as
+    TCP's and a serial socket's do: a session can be over before the pump has
+    finished with its stream, and a deadline swept in small steps lands on
+    each await of open, use and close."""
+
+    def __init__(self, inner: trio.abc.Stream, *, send_delay: float, close_delay: float) -> None:
+        self.inner = inner
+        self.send_delay = send_delay
+        self.close_delay = close_delay
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await trio.sleep(self.send_delay)
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        return await self.inner.receive_some(max_bytes)
+
+    async def aclose(self) -> None:
+        try:
+            await trio.sleep(self.close_delay)
+        finally:
+            await trio.aclose_forcefully(self.inner)

@@ -18,7 +18,7 @@ from tcpstream import ArmClient, CommandCode, FailureReason, Server, connect_tcp
 from tcpstream import commands as cmds
 
 from .fakearm import FakeArm
-from .harness import run
+from .harness import SlowStream, run
 
 GUARD = 30.0
 """Wall-clock guard for the loopback test (a hang fails it instead of hanging CI)."""
@@ -48,30 +48,6 @@ def test_a_deadline_around_the_block_over_loopback_tcp() -> None:
     assert arm.halts[0] is FailureReason.STOPPED
 
 
-class _Slow(trio.abc.Stream):
-    """Every send and close takes a little virtual time, so that a deadline
-    swept in small steps lands on each await of open, use and close."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await trio.sleep(0.003)
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes:
-        return await self.inner.receive_some(max_bytes)
-
-    async def aclose(self) -> None:
-        try:
-            await trio.sleep(0.005)
-        finally:
-            await trio.aclose_forcefully(self.inner)
-
-
 @pytest.mark.parametrize("wait_for_outcome", [False, True])
 def test_cancellation_injected_at_every_moment_of_open_use_and_close(
     wait_for_outcome: bool,
@@ -91,7 +67,7 @@ def test_cancellation_injected_at_every_moment_of_open_use_and_close(
             async def factory() -> trio.abc.Stream:
                 client_end, server_end = trio.testing.memory_stream_pair()
                 nursery.start_soon(server.serve_stream, server_end)
-                return _Slow(client_end)
+                return SlowStream(client_end, send_delay=0.003, close_delay=0.005)
 
             for deadline in deadlines:
                 with trio.move_on_after(deadline) as scope:

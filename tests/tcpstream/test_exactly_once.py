@@ -23,7 +23,7 @@ from tcpstream import (
 )
 
 from .fakearm import FakeArm
-from .harness import run
+from .harness import SlowStream, run
 
 
 class _DeafWhen:
@@ -91,30 +91,6 @@ def test_a_forgotten_identity_never_gets_its_command_run_twice() -> None:
     assert [(int(c.args[0]), c.args[1]) for c in moves] == [(1, 0.1), (2, 0.1)]
 
 
-class _SlowToClose(trio.abc.Stream):
-    """A client-side stream whose close takes a while, as TCP's and a serial
-    socket's do: the session is over before the pump has finished with it."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await trio.sleep(0.002)
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes:
-        return await self.inner.receive_some(max_bytes)
-
-    async def aclose(self) -> None:
-        try:
-            await trio.sleep(0.3)
-        finally:
-            await trio.aclose_forcefully(self.inner)
-
-
 def test_submit_during_reconnects_waits_for_the_session_and_leaks_nothing() -> None:
     """Finding 3: submit() racing a cut raised IllegalTransition (command not
     allowed in state closed) and left its handle pending, so leaving the client
@@ -133,7 +109,7 @@ def test_submit_during_reconnects_waits_for_the_session_and_leaks_nothing() -> N
                 client_end, server_end = trio.testing.memory_stream_pair()
                 nursery.start_soon(server.serve_stream, server_end)
                 cut_points.append(server_end if len(cut_points) % 2 else client_end)
-                return _SlowToClose(client_end)
+                return SlowStream(client_end, send_delay=0.002, close_delay=0.3)
 
             outcomes: dict[str, int] = {}
             with trio.fail_after(3600):
