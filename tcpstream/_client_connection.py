@@ -213,6 +213,11 @@ class ClientConnection(_Connection):
             Granted(role, params, packet.request_id, instance, remembered=remembered == 1)
         )
 
+    def _may_be_untagged(self, kind: PacketKind) -> bool:
+        # The arm refuses a bad AUTH with an untagged REFUSE (it cannot assume
+        # we hold the key); after the GRANT nothing untagged is believed.
+        return kind is PacketKind.REFUSE and self._state is SessionState.AUTH_SENT
+
     def _undecodable(self, exc: PacketError, raw: bytes, request_id: int, now: float) -> None:
         # A COMPLETED or FAILED the codec rejects (a non-finite word, say) still
         # answers its command: settle it now as failed, as for a COMPLETED whose

@@ -194,8 +194,13 @@ class _Connection(abc.ABC):
             except PacketError as exc:
                 # The magic was right, so the framing holds: skip exactly one packet.
                 del self._inbuf[:PACKET_SIZE]
-                rid = exc.request_id if self._tag_holds(raw) else 0
-                self._undecodable(exc, raw, rid, now)
+                if not self._tag_holds(raw):
+                    # Keyed, and not from the peer: nothing may change (see
+                    # _accept_packet), not even an answer or the garbage count.
+                    self._stats["tag_failures"] += 1
+                    self._drop_forgery(f"undecodable and unauthenticated: {exc.message}")
+                    continue
+                self._undecodable(exc, raw, exc.request_id, now)
                 continue
             del self._inbuf[:PACKET_SIZE]
             self._accept_packet(packet, raw, now)
@@ -349,26 +354,25 @@ class _Connection(abc.ABC):
         """The arm answers a rejected packet with FAILED; the controller only counts it."""
 
     def _accept_packet(self, packet: Packet, raw: bytes, now: float) -> None:
-        # Tag first (an unauthenticated packet must not move the counter), then
-        # the counter, then meaning.  REFUSE and CHALLENGE are never tagged:
-        # the arm cannot assume the controller holds the key.
-        if self._session_key is not None and packet.kind not in (
-            PacketKind.REFUSE,
-            PacketKind.CHALLENGE,
-        ):
+        # Tag first, then the counter, then meaning.  Once the session is keyed,
+        # nothing about it -- the counter, the dead-time timer, the garbage
+        # count, an answer -- changes for a packet that does not verify: a kind
+        # that is never tagged (CHALLENGE, REFUSE) is accepted only where the
+        # handshake expects it, before the session key exists or, for REFUSE,
+        # while the arm may still turn a bad AUTH away.
+        if self._session_key is not None and not self._may_be_untagged(packet.kind):
             expected = _auth.packet_tag(self._session_key, self._recv_dir, raw[:SIGNED_SIZE])
             if not _auth.verify(expected, packet.tag):
                 self._stats["tag_failures"] += 1
-                self._reject(FailureReason.NOT_AUTHORIZED, "authentication tag mismatch", 0, now)
+                self._drop_forgery(f"{packet.kind.name}: authentication tag mismatch")
                 return
         if packet.counter <= self._counter_in:
             self._stats["replays"] += 1
-            self._reject(
-                FailureReason.NOT_AUTHORIZED,
-                f"counter {packet.counter} is not above {self._counter_in}: replayed or reordered",
-                0,
-                now,
-            )
+            why = f"counter {packet.counter} is not above {self._counter_in}: replayed or reordered"
+            if self._session_key is not None:
+                self._drop_forgery(why)  # a recorded genuine packet, re-injected
+            else:
+                self._reject(FailureReason.NOT_AUTHORIZED, why, 0, now)
             return
         if trace.isEnabledFor(logging.DEBUG):
             trace.debug("%s in: %s", self.side.value, packet.describe())
@@ -393,6 +397,23 @@ class _Connection(abc.ABC):
             self._stats["heartbeats_in"] += 1
             return
         self._dispatch(packet, now)
+
+    def _may_be_untagged(self, kind: PacketKind) -> bool:
+        """Whether ``kind`` may arrive untagged in this state of a keyed session."""
+        return False
+
+    def _drop_forgery(self, message: str) -> None:
+        """Count and drop a packet of a keyed session that did not verify.
+
+        Unlike :meth:`_reject` it is not answered (no amplification: a forger
+        gets nothing back) and does not count towards the garbage limit (a
+        flood of forgeries must not end a session between genuine peers; the
+        dead time still ends it if the genuine peer falls silent).
+        """
+        self._stats["bad_packets"] += 1
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s dropped: %s", self.side.value, message)
+        self._events.append(PacketRejected(FailureReason.NOT_AUTHORIZED, message))
 
     def _reject_state(self, packet: Packet, now: float) -> None:
         self._reject(

@@ -365,27 +365,38 @@ def test_a_silent_controller_trips_the_deadman_and_the_arm_halts() -> None:
     run(main)
 
 
-def test_garbage_after_the_grant_is_counted_then_disconnects() -> None:
+@pytest.mark.parametrize("keyed", [False, True])
+def test_garbage_after_the_grant_is_counted_then_disconnects(keyed: bool) -> None:
+    """Unkeyed: the garbage limit ends the session (BYE GARBAGE).  Keyed: packets
+    whose tag does not verify change nothing (issue 17, finding 7) -- counted and
+    dropped, never answered, never towards the limit -- so a peer that sends
+    only garbage is ended by silence (the dead time) instead."""
+    config = CONFIG if keyed else ServerConfig(rtt_hint=0.2, max_connections=3)
+
     async def main() -> None:
-        async with serving() as (server, arm, opener):
-            peer, _client, _ = await _session(opener)
+        async with serving(config) as (server, arm, opener):
+            peer, _client, _ = await _session(opener, key=KEY if keyed else None)
             # Noise with no magic in it is skipped in one resync (one count); then
-            # framed packets of a version nobody speaks, each counted, up to the limit.
+            # framed packets of a version nobody speaks, each counted.
             noise = struct.pack("!d", math.nan) * (PACKET_SIZE // 8) * 3
             bad_version = (b"TL\x09" + bytes(PACKET_SIZE - 3)) * MAX_BAD_IN_A_ROW
             await peer.send(noise + bad_version)
             await peer.read_until_closed()
             assert peer.closed_at is not None
             bye = peer.packets()[-1]
-            assert (bye.kind, bye.status) == (PacketKind.BYE, CloseReason.GARBAGE), bye
-            # The resync counts as the first of the run: the limit closes after 7 more.
-            assert server.statistics().bad_packets == MAX_BAD_IN_A_ROW
+            expected = CloseReason.SILENCE if keyed else CloseReason.GARBAGE
+            assert (bye.kind, bye.status) == (PacketKind.BYE, expected), bye
+            # The resync counts as the first of the run, then each packet.
+            assert server.statistics().bad_packets == MAX_BAD_IN_A_ROW + (1 if keyed else 0)
+            if keyed:  # only the unframed noise was answered, not one forgery
+                assert [p.kind for p in peer.packets()].count(PacketKind.FAILED) == 1
             assert arm.executed == []
-            # The lease outlives a garbage close by the dead time (the same controller
+            # The lease outlives the close by the dead time (the same controller
             # may resume); then the deadman trips and the arm is free again.
             await _slot_freed(server)
             assert server.statistics().deadman_trips == 1
-            await _still_serves(server, arm, opener)
+            if keyed:  # _still_serves speaks with the key
+                await _still_serves(server, arm, opener)
 
     run(main)
 

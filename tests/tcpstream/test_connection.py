@@ -160,7 +160,12 @@ def test_client_without_key_cannot_answer_a_challenge() -> None:
     ended = [e for e in pair.client_events if isinstance(e, SessionEnded)]
     assert ended[0].reason is CloseReason.AUTHENTICATION
     assert "requires a pre-shared key" in ended[0].message
-    assert pair.server.state is SessionState.CLOSED  # it heard the BYE
+    # Its BYE is untagged, and after the CHALLENGE nothing untagged is believed
+    # (a forger could otherwise abort anyone's handshake): the arm ends it at
+    # the handshake timeout.
+    assert pair.server.state is SessionState.CHALLENGED
+    pair.server.handle_timer(60.0)
+    assert pair.server.state is SessionState.CLOSED
 
 
 def test_keyed_client_refuses_an_unauthenticated_arm() -> None:
@@ -189,7 +194,13 @@ def test_replayed_command_is_rejected_and_counted() -> None:
     assert received_commands(events) == []
     assert [type(e) for e in events] == [PacketRejected]
     assert pair.server.statistics().replays == 1
-    reply = decode_packet(pair.server.data_to_send())
+    # Keyed: a replay is dropped unanswered (a forger gets nothing back).
+    assert pair.server.data_to_send() == b""
+    unkeyed = Pair(server_key=None, client_key=None).open()
+    unkeyed.client.send_command(1, commands.move_joint(1, 0.1), 0.0)
+    unkeyed.flush()
+    unkeyed.server.receive_data(unkeyed.to_server[-1], 1.0)
+    reply = decode_packet(unkeyed.server.data_to_send())
     assert reply.kind is PacketKind.FAILED
     assert reply.status == FailureReason.NOT_AUTHORIZED
 
@@ -252,7 +263,9 @@ def test_counters_checked_without_a_key_too() -> None:
 
 
 def test_garbage_peer_is_dropped_after_the_limit_and_not_before() -> None:
-    pair = Pair().open()
+    # Unkeyed: a keyed session drops unauthenticated junk without counting it
+    # towards the limit (tests/tcpstream/test_forgery.py).
+    pair = Pair(server_key=None, client_key=None).open()
     junk = encode_packet(Packet(PacketKind.COMMAND, code=99))  # decodes to UnknownCommand
     junk = junk[:6] + b"\x00\x63" + junk[8:]
     pair.server.receive_data(junk * (MAX_BAD_IN_A_ROW - 1), 0.0)

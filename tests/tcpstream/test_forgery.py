@@ -1,0 +1,109 @@
+"""A forged packet changes nothing in a keyed session (issue 17, finding 7).
+
+An untagged CHALLENGE with counter 2^64-1, injected into a live keyed session,
+skipped the tag check (CHALLENGE is never tagged) but still moved the replay
+counter: every later genuine packet was rejected as a replay and the session
+died.  Now no state of a keyed session changes before a packet's tag
+verifies; a kind that carries no tag there is dropped and counted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from tcpstream import (
+    ClientConnection,
+    CloseReason,
+    CommandCode,
+    ControllerIdentity,
+    Packet,
+    PacketKind,
+    Role,
+    ServerConnection,
+    SessionParameters,
+    SessionState,
+    commands,
+    encode_packet,
+)
+
+KEY = b"0123456789abcdef-forgery"
+PARAMS = SessionParameters(0.25, 1.4, 0.0, 1024)
+HUGE = 2**64 - 1
+
+
+def _keyed_pair() -> tuple[ClientConnection, ServerConnection]:
+    client = ClientConnection(ControllerIdentity("ctl", 7), key=KEY)
+    server = ServerConnection(PARAMS, key=KEY)
+    client.connect(0.0)
+    for _ in range(2):  # HELLO/CHALLENGE, then AUTH/GRANT (b"" would mean EOF)
+        server.receive_data(client.data_to_send(), 0.0)
+        while server.next_event() is not None:
+            pass
+        if server.state is SessionState.AWAITING_DECISION:
+            server.grant(Role.CONTROLLER, 0, 0.0, remembered=True)
+        client.receive_data(server.data_to_send(), 0.0)
+    assert client.state is SessionState.OPEN
+    assert server.state is SessionState.OPEN
+    while client.next_event() is not None:
+        pass
+    return client, server
+
+
+def _forgeries() -> list[tuple[str, Packet]]:
+    """Every kind, untagged (or with a made-up tag), with a huge counter."""
+    out = []
+    for kind in PacketKind:
+        out.append((f"{kind.name} untagged", Packet(kind, counter=HUGE, request_id=1)))
+        out.append(
+            (
+                f"{kind.name} bad tag",
+                Packet(kind, counter=HUGE, request_id=1, tag=b"\x5a" * 16),
+            )
+        )
+    return out
+
+
+@pytest.mark.parametrize(("name", "forged"), _forgeries(), ids=[n for n, _ in _forgeries()])
+@pytest.mark.parametrize("target", ["arm", "controller"])
+def test_a_forged_packet_in_a_live_keyed_session_changes_nothing(
+    name: str, forged: Packet, target: str
+) -> None:
+    client, server = _keyed_pair()
+    receiver = server if target == "arm" else client
+    before = dataclasses.replace(receiver.statistics())
+    heard = receiver.last_heard
+    receiver.receive_data(encode_packet(forged), 0.5)
+    after = receiver.statistics()
+    assert receiver.state is SessionState.OPEN, name
+    assert receiver.last_heard == heard, "a forgery refreshed the dead-time timer"
+    assert after.bad_packets == before.bad_packets + 1
+    # Not answered either: a forgery gets no FAILED (no amplification).
+    assert receiver.data_to_send() == b""
+    # The session carries on: genuine traffic both ways is accepted.
+    client.send_command(1, commands.move_joint(1, 0.1), 0.6)
+    server.receive_data(client.data_to_send(), 0.6)
+    events = []
+    while (ev := server.next_event()) is not None:
+        events.append(type(ev).__name__)
+    assert "CommandReceived" in events, (name, events)
+    server.accepted(1, CommandCode.MOVE_JOINT, 0, 0.7)
+    client.receive_data(server.data_to_send(), 0.7)
+    got = []
+    while (ev := client.next_event()) is not None:
+        got.append(type(ev).__name__)
+    assert "Accepted" in got, (name, got)
+    assert client.state is SessionState.OPEN
+    assert server.state is SessionState.OPEN
+
+
+def test_many_forgeries_do_not_end_a_keyed_session_as_garbage() -> None:
+    client, server = _keyed_pair()
+    for i in range(50):
+        server.receive_data(encode_packet(Packet(PacketKind.HEARTBEAT, counter=100 + i)), 0.1)
+    assert server.state is SessionState.OPEN
+    assert server.statistics().tag_failures == 50
+    client.close(CloseReason.NORMAL, 0.2, "done")
+    server.receive_data(client.data_to_send(), 0.2)
+    assert server.state is SessionState.CLOSED  # the genuine BYE still counts
