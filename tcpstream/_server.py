@@ -16,6 +16,7 @@ controller is lost, and the listener keeps accepting throughout.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import math
 from collections import deque
@@ -51,6 +52,7 @@ from ._packet import PACKET_SIZE
 from ._pump import Pump
 from ._ratelimit import TokenBucket
 from ._server_connection import ServerConnection
+from ._state import SessionState
 
 __all__ = ["Server", "ServerStatistics"]
 
@@ -96,6 +98,10 @@ class ServerStatistics:
     throttled_seconds: float
     """Seconds those pauses added up to, over all connections: under a sustained
     flood it grows about as fast as the clock, once per flooding connection."""
+    handshakes_evicted: int
+    """Connections not yet authenticated that were closed to admit a newer one
+    when the server was full (a flood of idle sockets cannot keep a controller
+    out; see PROTOCOL.md section 10)."""
 
 
 @dataclass(slots=True)
@@ -104,6 +110,9 @@ class _Job:
     request_id: int
     command: Command
     failures_seen: int = 0
+
+
+_ARRIVALS = itertools.count()
 
 
 class _Link:
@@ -130,6 +139,11 @@ class _Link:
         self.identity: ControllerIdentity | None = None
         self.role: Role | None = None
         self.granted = trio.Event()
+        """Set once the arm has decided (granted or refused)."""
+        self.arrived = next(_ARRIVALS)
+        """Arrival order: among equals, the oldest handshake is evicted first."""
+        self.scope: trio.CancelScope | None = None
+        """The connection's serving scope, to evict it."""
 
 
 class Server:
@@ -189,6 +203,7 @@ class Server:
                 "telemetry_sent",
                 "telemetry_skipped",
                 "throttled",
+                "handshakes_evicted",
             ),
             0,
         )
@@ -249,13 +264,14 @@ class Server:
         if self._nursery is None:
             raise RuntimeError("use the server inside 'async with Server(...) as server:'")
         self._stats["connections_total"] += 1
-        if len(self._links) >= self.config.max_connections:
+        if len(self._links) >= self.config.max_connections and not self._evict_a_handshake():
             await self._refuse_full(stream)
             return
         link = _Link(self, stream)
         self._links.add(link)
         try:
             async with trio.open_nursery() as nursery:
+                link.scope = nursery.cancel_scope
                 nursery.start_soon(self._handshake_guard, link, nursery.cancel_scope)
                 await link.pump.run()
                 nursery.cancel_scope.cancel()
@@ -267,6 +283,33 @@ class Server:
                 link.conn.close(CloseReason.SHUTDOWN, trio.current_time())
                 link.pump.drain_events()
             self._detach(link)
+
+    def _evict_a_handshake(self) -> bool:
+        """Make room by closing the least advanced connection not yet decided.
+
+        Connections that have not authenticated (or, without a key, not sent a
+        well-formed HELLO) must not starve the sessions the arm exists for: a
+        flood of idle or half-open sockets would otherwise keep a keyed
+        controller -- above all one resuming after a blip -- out with
+        SERVER_FULL.  A connection that has not sent a complete HELLO goes
+        first, then one stuck after its HELLO; the oldest of either kind first.
+        A genuine controller completes its handshake within a round trip, so a
+        flood must open more than ``max_connections`` sockets per round trip
+        to keep it out.  Granted sessions are never evicted.
+        """
+        undecided = [ln for ln in self._links if not ln.granted.is_set() and ln.scope is not None]
+        if not undecided:
+            return False
+        victim = min(
+            undecided,
+            key=lambda ln: (ln.conn.state is not SessionState.AWAITING_HELLO, ln.arrived),
+        )
+        self._stats["handshakes_evicted"] += 1
+        log.info("server full: closing an unauthenticated connection to admit a new one")
+        self._links.discard(victim)  # its slot is free now, whatever its close takes
+        assert victim.scope is not None
+        victim.scope.cancel()
+        return True
 
     async def _handshake_guard(self, link: _Link, scope: trio.CancelScope) -> None:
         # The connection's own handshake timer needs a writable stream to send its

@@ -411,7 +411,9 @@ def test_loopback_flood_cannot_exceed_max_connections() -> None:
         assert peak <= config.max_connections
         assert len(outcomes) == 60
         assert "still open" not in outcomes
-        assert stats.refused > 0
+        # The flood was turned away: refused when the slots held sessions,
+        # or its older handshakes closed to admit newer connections.
+        assert stats.refused + stats.handshakes_evicted > 0
         assert arm.count(CommandCode.MOVE_JOINT) == 1
 
     trio.run(main)
