@@ -102,10 +102,16 @@ class KermitSender(KermitSide):
                 self._retransmit_oldest(now)  # even NAK(1): the ACK of S carries parameters
             elif slot is not None and not slot.acked:
                 self._retransmit(slot, now)
-            elif packet.seq == self._seq:
-                window.ack_all()  # NAK(n+1) = ACK(n)
+            elif packet.seq == self._seq and window.size == 1:
+                # Stop-and-wait only: NAK(n+1) = ACK(n) (Kermit protocol manual).
+                window.ack_all()
                 self._deadline = now + self._timeout()
                 self._after_ack(None, now)
+            elif packet.seq == self._seq:
+                # With windows a NAK acknowledges nothing: C-Kermit NAKs ahead
+                # of a packet it still misses.  Resend the oldest unacknowledged
+                # one (its NAK may have been lost); Z waits for every ACK.
+                self._retransmit_oldest(now)
         # Anything else from a receiver (echoes, stray types) is ignored, as ckcfn2.c does.
 
     def _after_ack(self, ack: Packet | None, now: float) -> None:

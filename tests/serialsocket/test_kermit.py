@@ -422,3 +422,34 @@ def test_unanswered_break_is_resent_twice_then_the_batch_ends() -> None:
     assert sender.data_to_send() == b""
     assert sender.next_event() == TransferComplete(break_acknowledged=False)
     assert sender.get_timer() is None
+
+
+def test_with_windows_a_nak_of_the_next_packet_acknowledges_nothing() -> None:
+    """Issue 17, finding 9: C-Kermit with windows NAKs sequence numbers beyond a
+    packet it still misses.  Our sender took NAK(last sent + 1) as an ACK of
+    everything outstanding, sent Z with data missing and exited 0."""
+    config = KermitConfig(window=8, max_packet_length=96, attributes=False, timeout=10.0)
+    data = b"".join(b"line %04d\n" % i for i in range(40))  # a few D packets
+    sender = KermitSender([OutgoingFile("t", len(data), io.BytesIO(data))], config, 0.0)
+    sender.data_to_send()
+    sender.receive_data(_ack_s(config), 0.1)
+    sender.data_to_send()  # F, seq 1
+    sender.receive_data(build_packet(Packet(seq=1, type="Y"), BlockCheck.CRC16), 0.2)
+    burst = sender.data_to_send()
+    sent = burst.count(b"\x01")
+    assert 2 <= sent <= 8  # D 2 .. 2+sent-1, the whole file
+    nxt = 2 + sent
+    # The receiver got every D but the first, ACKs them, then NAKs ahead.
+    for seq in range(3, nxt):
+        sender.receive_data(build_packet(Packet(seq=seq, type="Y"), BlockCheck.CRC16), 0.3)
+    sender.data_to_send()
+    sender.receive_data(build_packet(Packet(seq=nxt, type="N"), BlockCheck.CRC16), 0.4)
+    out = sender.data_to_send()
+    assert out[3:4] == b"D", "D 2 is still missing: resend it, never Z"
+    assert out[2] - 32 == 2
+    assert sender.state is KermitState.SEND_DATA
+    # Only once D 2 is acknowledged does Z go out.
+    sender.receive_data(build_packet(Packet(seq=2, type="Y"), BlockCheck.CRC16), 0.5)
+    z = sender.data_to_send()
+    assert z[3:4] == b"Z"
+    assert sender.state is KermitState.SEND_EOF
