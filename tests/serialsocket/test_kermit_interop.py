@@ -123,3 +123,30 @@ def test_delayed_noisy_line_window_8_long_packets(
     gkermit = "gkermit" in (sender, receiver)
     stats = _transfer(tmp_path, setup, 8_000 if gkermit else 20_000)
     assert stats.window == (1 if gkermit else 8)
+
+
+@pytest.mark.slow
+def test_our_sender_to_ckermit_on_a_moon_line_at_1e_3_delivers_every_byte(
+    tmp_path: pathlib.Path,
+) -> None:
+    """Issue 17, finding 9: at 1.3 s one way and byte corruption 1e-3 our sender
+    declared success with C-Kermit holding 3875 of 8192 bytes (it took C-Kermit's
+    NAK-ahead as an ACK of everything).  Both sides must now finish with every
+    file identical; run_transfer raises if either side fails or a byte differs.
+    (9600 bit/s, window 16, 2 x 2.5 KB: about 50 s of wall time; the old sender
+    fails it.)"""
+    rate, window, size = 9600, 16, 2_500
+    setup = TransferSetup(
+        sender="ours",
+        receiver="ckermit",
+        window=window,
+        packet_length=250,
+        delay=1.3,
+        byte_error_rate=1e-3,
+        rate=rate,
+        timeout=8,
+        limit=240,
+        seed=17,
+    )
+    stats = _transfer(tmp_path, setup, size)
+    assert stats.window == window
