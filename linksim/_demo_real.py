@@ -132,6 +132,8 @@ async def run_real(options: DemoOptions) -> DemoReport:
         ConnectionError,
     ) as exc:
         error = explain_failure(exc)
+    if error is None and holder.get("close_error"):
+        error = str(holder["close_error"])  # every command ran, but the link did not close cleanly
     seconds = trio.current_time() - start
     figures: dict[str, Any] = holder.get("figures", {})
     relay: RelayStatistics | None = holder.get("relay")
@@ -232,10 +234,13 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
                         _say(options, "closing the session")
                 finally:
                     _say(options, "closing the serial link (waiting for the last acknowledgements)")
-                    with trio.move_on_after(endpoint.derived_dead_after()) as s:
-                        s.shield = True
+                    # Shielded: the close must run even if the run was cancelled;
+                    # it is bounded by itself (no progress for close_timeout, or
+                    # the dead link), never by a fixed time while data drains.
+                    with trio.CancelScope(shield=True):
                         await sock.aclose()
-                    _say(options, "serial link closed")
+                    holder["close_error"] = sock.close_error
+                    _say(options, sock.close_error or "serial link closed")
         finally:
             stop.set()
 

@@ -328,6 +328,17 @@ class Endpoint:
         return len(self._receiver.readable)
 
     @property
+    def data_settled(self) -> bool:
+        """Every byte we were given is acknowledged and the peer's EOF has arrived.
+
+        The data of both directions is complete, whatever then happens to the
+        closing handshake (a last ACK of our EOF lost with the line is not data
+        lost): what "delivered" means for a close (RELIABILITY.md section 1).
+        """
+        s = self._sender
+        return not s.queue and s.bytes_in_flight == 0 and self._receiver.eof
+
+    @property
     def at_eof(self) -> bool:
         """The peer's EOF has been delivered and every byte before it read."""
         return self._receiver.eof and not self._receiver.readable

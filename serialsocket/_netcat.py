@@ -154,6 +154,15 @@ async def _run(args: argparse.Namespace, listening: bool) -> None:
             await _pump(sock)
         finally:
             await sock.aclose()
+        # Exit 0 means delivered: every byte of stdin acknowledged by the peer
+        # and the peer's EOF received.  A close that did not complete is not
+        # that, however quietly it ended.
+        if sock.close_error is not None:
+            raise IncompleteClose(sock.close_error)
+
+
+class IncompleteClose(Exception):
+    """The transfer ran but the close did not complete: not everything is known delivered."""
 
 
 def _first_leaf(group: BaseExceptionGroup[BaseException]) -> BaseException:
@@ -189,6 +198,9 @@ def netcat_main(args: argparse.Namespace, *, listening: bool) -> int:
         cause = exc.__cause__
         reason = cause if isinstance(cause, LinkBroken) else exc
         print(f"serialsocket {name}: the link failed: {reason}", file=sys.stderr)
+        return 1
+    except IncompleteClose as exc:
+        print(f"serialsocket {name}: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130

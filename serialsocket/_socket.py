@@ -83,8 +83,8 @@ class SerialSocket(trio.abc.HalfCloseableStream):
     :meth:`SerialListener.accept`.  Semantics follow ``trio.abc``:
     ``receive_some`` returns ``b""`` only at the peer's EOF; after
     ``send_eof`` the peer sees EOF once every byte before it arrived;
-    ``aclose`` closes gracefully (bounded by ``close_timeout``) and, if
-    cancelled, aborts.
+    ``aclose`` closes gracefully -- for as long as the close makes progress,
+    giving up after ``close_timeout`` without any -- and, if cancelled, aborts.
     """
 
     def __init__(self, driver: _Driver, *, close_timeout: float) -> None:
@@ -95,6 +95,11 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         self._sending = False
         self._receiving = False
         self.close_timeout = close_timeout
+        """Seconds a close may go without progress before it is given up."""
+        self.close_error: str | None = None
+        """After :meth:`aclose`: None if the close completed (every byte we sent
+        acknowledged and the peer's EOF received), else what went wrong and how
+        many bytes were acknowledged, in flight and never sent."""
 
     @property
     def endpoint(self) -> Endpoint:
@@ -229,10 +234,18 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self._receiving = False
 
     async def aclose(self) -> None:
-        """Close gracefully: all our data delivered, both EOFs exchanged.
+        """Close gracefully: all our data acknowledged, both EOFs exchanged.
 
-        Bounded by ``close_timeout``; then, or if cancelled, the connection is
-        aborted with an E packet.  Idempotent.
+        Waits as long as the close makes progress -- our data being
+        acknowledged, the peer's still arriving -- and gives up only after
+        ``close_timeout`` without any (or when the link is judged dead): a
+        long backlog on a slow line drains, however long it takes.  If the
+        close does not complete -- no progress, the link died, the peer
+        aborted -- the connection is aborted with an E packet and
+        :attr:`close_error` says so, with what was acknowledged, in flight and
+        never sent (``aclose`` itself does not raise for it, as trio's streams
+        do not; a program whose exit status means "delivered" checks it, as the
+        netcat does).  If cancelled, the connection is aborted.  Idempotent.
         """
         if self._closed:
             await trio.lowlevel.checkpoint()
@@ -240,16 +253,21 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         self._closed = True
         d = self._d
         d.notify()  # wake our own blocked receive/send: they now raise Closed
+        failure: str | None = None
+        closing = False  # we began a graceful close (its failure is news to the caller)
         try:
             await trio.lowlevel.checkpoint()
             if d.ep.state is State.ESTABLISHED and d.broken is None:
+                closing = True
                 d.ep.close(d.now())
                 d.notify()
-                with trio.move_on_after(self.close_timeout):
-                    while d.ep.state is State.ESTABLISHED and d.broken is None:
-                        await d.changed()
-            if d.ep.state is State.ESTABLISHED:
-                d.ep.abort("close timed out: the peer did not finish closing", d.now())
+                await self._drain_close()
+            if d.ep.state is State.ESTABLISHED and d.broken is None:
+                failure = (
+                    f"close made no progress for {self.close_timeout:.1f} s: "
+                    f"{_counts(d.ep.statistics())}"
+                )
+                d.ep.abort("close timed out: no progress", d.now())
         except trio.Cancelled:
             if d.ep.state not in TERMINAL:
                 d.ep.abort("connection closed by the application", d.now())
@@ -260,6 +278,36 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 await d.stop()
             else:
                 d.notify()
+        # A link that was already broken was reported by the call that found
+        # it; a graceful close that did not complete is recorded here (trio's
+        # contract: aclose closes, it does not report -- see close_error).
+        graceful = d.ep.state in (State.CLOSED, State.LINGER) or d.ep.data_settled
+        if failure is not None:
+            self.close_error = f"the close did not complete: {failure}"
+        elif closing and not graceful and d.broken is not None:
+            self.close_error = f"the close did not complete: {d.broken}"
+
+    async def _drain_close(self) -> None:
+        """Wait for the close to finish, re-arming the deadline on every bit of progress."""
+        d = self._d
+
+        def progress() -> tuple[int, int]:
+            # Our own data being acknowledged: after close() we read nothing
+            # more, so the peer's packets are not progress of this close.
+            st = d.ep.statistics()
+            return st.bytes_acknowledged, st.in_flight
+
+        mark = progress()
+        deadline = trio.current_time() + self.close_timeout
+        while d.ep.state is State.ESTABLISHED and d.broken is None:
+            with trio.move_on_at(deadline):
+                await d.changed()
+            now_mark = progress()
+            if now_mark != mark:
+                mark = now_mark
+                deadline = trio.current_time() + self.close_timeout
+            elif trio.current_time() >= deadline:
+                return
 
 
 class SerialListener(trio.abc.Listener[SerialSocket]):
@@ -465,3 +513,10 @@ async def serve(
                 log.info("connection ended: %s", exc)
             finally:
                 await sock.aclose()
+
+
+def _counts(st: EndpointStatistics) -> str:
+    return (
+        f"{st.bytes_acknowledged} bytes acknowledged, {st.in_flight} packets in flight, "
+        f"{st.bytes_queued} bytes never sent"
+    )

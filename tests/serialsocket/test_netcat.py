@@ -212,3 +212,72 @@ def test_busy_number_is_reported() -> None:
     finally:
         relay.send_signal(signal.SIGTERM)
         relay.wait(timeout=GUARD)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hints", [False, True], ids=["no-hints", "hints"])
+def test_both_directions_over_an_impaired_line_exit_0_only_with_every_byte(
+    tmp_path: pathlib.Path, hints: bool
+) -> None:
+    """Issue 17, finding 5: at close, connect aborted with 61-62 KB of 64 KiB
+    received, or exited 0 while its peer was missing data.  Over a lossy
+    relay, both directions at once: each side exits 0 if and only if what it
+    received is exactly what the other sent (and then both are)."""
+    relay = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "linksim",
+            "relay",
+            "--json",
+            "--seed",
+            "3",
+            "--rate",
+            "115200",
+            "--delay",
+            "0.05",
+            "--ber",
+            "1e-4",
+            "--loss",
+            "1e-4",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert relay.stdout is not None
+        paths = json.loads(relay.stdout.readline())
+        a, b = paths["a"], paths["b"]
+        up = random.Random(11).randbytes(32_000)
+        down = random.Random(12).randbytes(32_000)
+        (tmp_path / "up").write_bytes(up)
+        (tmp_path / "down").write_bytes(down)
+        extra = ["--baud", "115200", "--delay", "0.05"] if hints else []
+        with (tmp_path / "down").open("rb") as down_in:
+            server = subprocess.Popen(
+                cli("listen", b, *extra),
+                stdin=down_in,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+            )
+        try:
+            wait_until_reading(server, b)
+            with (tmp_path / "up").open("rb") as up_in:
+                client = subprocess.run(
+                    cli("connect", a, *extra, "--connect-timeout", "30"),
+                    stdin=up_in,
+                    capture_output=True,
+                    timeout=GUARD * 3,
+                )
+            got_up, server_err = server.communicate(timeout=GUARD * 3)
+        finally:
+            _reap(server)
+    finally:
+        relay.send_signal(signal.SIGTERM)
+        relay.wait(timeout=GUARD)
+    # Exit 0 if and only if delivered, on each side.
+    assert (client.returncode == 0) == (client.stdout == down), client.stderr[-1500:]
+    assert (server.returncode == 0) == (got_up == up), server_err[-1500:]
+    # And on this line it is delivered.
+    assert client.returncode == 0, client.stderr[-1500:]
+    assert server.returncode == 0, server_err[-1500:]
