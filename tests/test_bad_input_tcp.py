@@ -36,7 +36,6 @@ from tcpstream import (
     Packet,
     PacketKind,
     RefusalReceived,
-    RefuseReason,
     Server,
     ServerConfig,
     SessionEnded,
@@ -223,11 +222,11 @@ def test_half_open_connections_fill_the_server_then_time_out() -> None:
     sockets kept a keyed controller out with SERVER_FULL)."""
 
     async def main() -> None:
-        async with serving() as (server, arm, opener):
+        async with serving() as (server, _arm, opener):
             silent = [opener.open() for _ in range(CONFIG.max_connections)]
             await trio.sleep(0.1)
             assert server.statistics().connections == CONFIG.max_connections
-            peer, _client, events = await _session(opener)
+            _peer, _client, events = await _session(opener)
             assert any(isinstance(e, Granted) for e in events), events
             await silent[0].read_until_closed()  # the oldest silent one made room
             assert silent[0].closed_at is not None
