@@ -36,7 +36,9 @@ from ._client_core import (
     RequestBook,
     Settlement,
     describe_error,
+    gave_up,
     is_emergency,
+    refusal_error,
 )
 from ._commands import (
     Command,
@@ -48,7 +50,6 @@ from ._connection import ConnectionStatistics
 from ._errors import (
     AuthenticationFailed,
     LocalProtocolError,
-    Refused,
     SessionClosed,
 )
 from ._events import (
@@ -61,7 +62,6 @@ from ._events import (
     Granted,
     PacketRejected,
     RefusalReceived,
-    RefuseReason,
     Role,
     SessionEnded,
     SessionParameters,
@@ -367,12 +367,7 @@ class ArmClient(CommandMethods):
                         last_error = describe_error(exc)
                         log.info("reconnect attempt %d failed: %s", used, last_error)
                 if next_stream is None:
-                    if self._reconnect_attempts == 0:
-                        lost += "; reconnecting is off"
-                    else:
-                        tries = f"{used} reconnect attempt{'s' if used != 1 else ''}"
-                        lost += f"; {tries} failed"
-                        lost += f" (last: {last_error})" if last_error else ""
+                    lost = gave_up(lost, self._reconnect_attempts, used, last_error)
                     break
                 if self._closing():  # closed while we were reconnecting
                     await trio.aclose_forcefully(next_stream)
@@ -422,13 +417,7 @@ class ArmClient(CommandMethods):
         elif isinstance(event, Granted):
             self._granted(event)
         elif isinstance(event, RefusalReceived):
-            if event.reason is RefuseReason.NOT_AUTHORIZED:
-                self._failure = AuthenticationFailed(
-                    f"the arm refused our key ({event.message}); "
-                    "check that both ends have the same pre-shared key"
-                )
-            else:
-                self._failure = Refused(event.reason, event.message)
+            self._failure = refusal_error(event)
         elif isinstance(event, SessionEnded):
             # Not ready from this moment, not from when the pump has finished
             # closing the stream (which can take a while): submit() must not

@@ -17,10 +17,33 @@ from dataclasses import dataclass
 
 from . import _builders as build
 from ._commands import Command, CommandCode, CommandFailed, CommandResult
-from ._errors import LocalProtocolError, OutcomeUnknown, SessionClosed
-from ._events import Accepted, CloseReason, Completed, Event, Failed, Granted
+from ._errors import (
+    AuthenticationFailed,
+    LocalProtocolError,
+    OutcomeUnknown,
+    Refused,
+    SessionClosed,
+    SessionError,
+)
+from ._events import (
+    Accepted,
+    CloseReason,
+    Completed,
+    Event,
+    Failed,
+    Granted,
+    RefusalReceived,
+    RefuseReason,
+)
 
-__all__ = ["CommandMethods", "RequestBook", "Settlement", "describe_error"]
+__all__ = [
+    "CommandMethods",
+    "RequestBook",
+    "Settlement",
+    "describe_error",
+    "gave_up",
+    "refusal_error",
+]
 
 log = logging.getLogger("tcpstream._client")
 
@@ -156,6 +179,24 @@ class RequestBook:
         if self.sent.pop(rid, None) is None:
             return []
         return [Settlement(rid, result=result, error=error)]
+
+
+def refusal_error(event: RefusalReceived) -> SessionError:
+    """The typed error a caller gets for the arm's REFUSE."""
+    if event.reason is RefuseReason.NOT_AUTHORIZED:
+        return AuthenticationFailed(
+            f"the arm refused our key ({event.message}); "
+            "check that both ends have the same pre-shared key"
+        )
+    return Refused(event.reason, event.message)
+
+
+def gave_up(lost: str, attempts: int, used: int, last_error: str) -> str:
+    """Why a client stopped trying: the loss, then what reconnecting did."""
+    if attempts == 0:
+        return f"{lost}; reconnecting is off"
+    text = f"{lost}; {used} reconnect attempt{'s' if used != 1 else ''} failed"
+    return text + (f" (last: {last_error})" if last_error else "")
 
 
 def describe_error(exc: BaseException) -> str:

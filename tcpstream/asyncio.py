@@ -42,13 +42,14 @@ from ._client_core import (
     RequestBook,
     Settlement,
     describe_error,
+    gave_up,
     is_emergency,
+    refusal_error,
 )
 from ._commands import Command, CommandResult, Feedback, validate_arguments
 from ._errors import (
     AuthenticationFailed,
     LocalProtocolError,
-    Refused,
     SessionClosed,
 )
 from ._events import (
@@ -58,7 +59,6 @@ from ._events import (
     Granted,
     PacketRejected,
     RefusalReceived,
-    RefuseReason,
     Role,
     SessionEnded,
     SessionParameters,
@@ -312,11 +312,7 @@ class AsyncioArmClient(CommandMethods):
                         last_error = describe_error(exc)
                         log.info("reconnect attempt %d failed: %s", used, last_error)
                 if next_streams is None:
-                    if cfg.reconnect_attempts == 0:
-                        lost += "; reconnecting is off"
-                    else:
-                        lost += f"; {used} reconnect attempt{'s' if used != 1 else ''} failed"
-                        lost += f" (last: {last_error})" if last_error else ""
+                    lost = gave_up(lost, cfg.reconnect_attempts, used, last_error)
                     return
                 if self._closing():  # closed while we were reconnecting
                     next_streams[1].close()
@@ -469,13 +465,7 @@ class AsyncioArmClient(CommandMethods):
                 if not _offer(queue, event.feedback):
                     self.telemetry_dropped += 1
         elif isinstance(event, RefusalReceived):
-            if event.reason is RefuseReason.NOT_AUTHORIZED:
-                self._failure = AuthenticationFailed(
-                    f"the arm refused our key ({event.message}); "
-                    "check that both ends have the same pre-shared key"
-                )
-            else:
-                self._failure = Refused(event.reason, event.message)
+            self._failure = refusal_error(event)
         elif isinstance(event, SessionEnded):
             self._ready = False
             state.ended = event
