@@ -150,15 +150,12 @@ def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
     else:
         for o in report.outcomes:
             verdict = "ok" if o.ok else f"{o.reason.name}: {o.message}"
-            print(
-                f"#{o.index:<2} {o.start:6.2f} s +{o.duration:5.2f} s  {o.label}: {verdict}",
-                file=sys.stderr,
-            )
+            # Results to stdout (`--preview-only > plan.txt`), diagnostics to stderr.
+            print(f"#{o.index:<2} {o.start:6.2f} s +{o.duration:5.2f} s  {o.label}: {verdict}")
         p = ", ".join(f"{x:+.3f}" for x in report.final.p)
         print(
             f"{'OK' if report.ok else 'REFUSED'}: {report.duration:.2f} s of motion, "
-            f"ends with the hand at ({p}) m",
-            file=sys.stderr,
+            f"ends with the hand at ({p}) m"
         )
     return 0 if report.ok else 1
 
@@ -179,5 +176,5 @@ def plot_main(args: argparse.Namespace) -> int:
     except (PlotUnavailable, ValueError, OSError) as exc:
         print(f"linksim plot: {exc}", file=sys.stderr)
         return 1
-    print(path, file=sys.stderr)
+    print(path)  # the result: where the plot is
     return 0

@@ -353,14 +353,18 @@ def run_demo(options: DemoOptions) -> DemoReport:
 
 
 def print_report(report: DemoReport, *, as_json: bool) -> None:
-    """The final report: one JSON object on stdout, or a readable summary on stderr."""
+    """The final report on stdout: one JSON object, or a readable summary.
+
+    Results go to stdout and progress to stderr, so ``linksim demo > run.txt``
+    keeps the report and ``--json | jq`` sees only JSON.
+    """
     data = report.as_dict()
     if as_json:
         json.dump(data, sys.stdout)
         sys.stdout.write("\n")
         sys.stdout.flush()
         return
-    out = sys.stderr
+    out = sys.stdout
     c = data["commands"]
     clock = "virtual" if report.virtual else "wall-clock"
     print(

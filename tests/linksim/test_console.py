@@ -198,11 +198,11 @@ def test_preview_only_connects_to_nothing(
     path = tmp_path / "far.toml"
     path.write_text(dataclasses.replace(DEFAULT_WORLD, objects=(far,)).to_toml())
     assert main(["console", "--preview-only", "--world", str(path)]) == 1
-    err = capsys.readouterr().err
-    assert "#2 " in err
-    assert "UNREACHABLE: via point 1" in err
-    assert err.count("SKIPPED") == 9
-    assert err.rstrip().splitlines()[-1].startswith("REFUSED: 0.00 s of motion")
+    out = capsys.readouterr().out  # the plan is the result: stdout (> plan.txt keeps it)
+    assert "#2 " in out
+    assert "UNREACHABLE: via point 1" in out
+    assert out.count("SKIPPED") == 9
+    assert out.rstrip().splitlines()[-1].startswith("REFUSED: 0.00 s of motion")
 
 
 def test_an_observer_session_shows_reports_and_predicts_nothing() -> None:

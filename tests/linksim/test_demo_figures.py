@@ -33,3 +33,17 @@ def test_a_tcp_run_has_no_line_to_be_busy() -> None:
     figures = report.as_dict()["link"]
     assert figures["payload_sent_Bps"] > 0
     assert "line_use_sent" not in figures
+
+
+def test_the_human_report_is_on_stdout_and_progress_on_stderr(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Issue 19: ``linksim demo > run.txt`` kept nothing; results now go to stdout."""
+    from linksim._cli import main
+
+    assert main(["demo", "--virtual", "--plain"]) == 0
+    out, err = capsys.readouterr()
+    assert "OK: 11/11 commands completed" in out
+    assert "link: rtt_s" in out
+    assert "#1  sent" in err
+    assert "#1  sent" not in out
