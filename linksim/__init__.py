@@ -19,6 +19,16 @@
   JSON-lines log (``linksim plot``).
 """
 
+from importlib.metadata import PackageNotFoundError as _NotInstalled
+from importlib.metadata import version as _version
+
+try:
+    __version__ = _version("telelink")
+    """The telelink distribution's version (pyproject.toml is the one source)."""
+except _NotInstalled:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
+
+
 from ._arm import ArmStatistics, SimulatedArm
 from ._channel import ImpairedLink, LinkEnd, LinkStatistics, open_impaired_link
 from ._config import (

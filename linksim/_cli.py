@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import pathlib
 import signal
 import sys
@@ -15,6 +16,7 @@ from typing import Any
 import trio
 
 from . import (
+    __version__,
     _armserver,
     _bench_codec,
     _bench_flood,
@@ -249,6 +251,7 @@ def relay_main(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser; subcommands register here."""
     ap = argparse.ArgumentParser(prog="linksim", description="Impaired links and benchmarks.")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     relay = sub.add_parser("relay", help="impaired relay between two ptys (or given ttys)")
     _relay_arguments(relay)
@@ -308,7 +311,34 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the linksim command line; returns the exit status."""
+    """Run the linksim command line; returns the exit status.
+
+    Ctrl-C ends any command with one line and status 130 (the sessions it
+    interrupts still say BYE on the way out); a closed pipe on stdout ends
+    it quietly with 141.
+    """
     args = build_parser().parse_args(argv)
-    status: int = args.func(args)
+    try:
+        status: int = args.func(args)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
+    except BaseException as exc:
+        if not _interrupted(exc):
+            raise
+        print(f"linksim {args.command}: interrupted", file=sys.stderr)
+        return 130
     return status
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """A Ctrl-C, alone or inside trio's exception groups (with cancellations)."""
+    if isinstance(exc, KeyboardInterrupt):
+        return True
+    if isinstance(exc, BaseExceptionGroup):
+        return all(
+            _interrupted(e) or isinstance(e, trio.Cancelled) for e in exc.exceptions
+        ) and any(_interrupted(e) for e in exc.exceptions)
+    return False

@@ -132,7 +132,7 @@ def console_main(args: argparse.Namespace) -> int:
         result = run_console(options)
     except KeyboardInterrupt:
         print("linksim console: interrupted", file=sys.stderr)
-        return 1
+        return 130  # as a shell reports SIGINT
     if args.json:
         json.dump(result.as_dict(), sys.stdout)
         sys.stdout.write("\n")

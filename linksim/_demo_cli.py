@@ -115,7 +115,7 @@ def demo_main(args: argparse.Namespace) -> int:
         report = run_demo(options)
     except KeyboardInterrupt:
         print("linksim demo: interrupted", file=sys.stderr)
-        return 1
+        return 130  # as a shell reports SIGINT
     return _finish(report, args, "linksim demo")
 
 

@@ -244,13 +244,13 @@ class ArmClient(CommandMethods):
             else:
                 # Tell the arm we are gone (it halts outstanding work at once
                 # rather than waiting out the deadman).
-                self._close_now(CloseReason.SHUTDOWN, f"controller error: {exc!r}")
+                self._close_now(CloseReason.SHUTDOWN, _bye_text(exc))
                 await self._flush_goodbye()
         except BaseException as inner:
             # Cancelled (a deadline around the block) or failed while closing:
             # the session still ends with a BYE, and the tasks still stop.
             if not self._ending:
-                self._close_now(CloseReason.SHUTDOWN, f"controller stopped closing: {inner!r}")
+                self._close_now(CloseReason.SHUTDOWN, _bye_text(inner))
             await self._flush_goodbye()
             raise
         finally:
@@ -548,6 +548,14 @@ class ArmClient(CommandMethods):
             bytes_received=pump.bytes_in if pump is not None else 0,
             connection=pump.conn.statistics() if pump is not None else None,
         )
+
+
+def _bye_text(exc: BaseException) -> str:
+    """What the BYE tells the arm about why the controller left: the kind of
+    ending, never the exception's text (it is local detail, not protocol)."""
+    if isinstance(exc, KeyboardInterrupt | trio.Cancelled):
+        return "controller interrupted"
+    return f"controller error ({type(exc).__name__})"
 
 
 async def _set_when(event: trio.Event, scope: trio.CancelScope) -> None:

@@ -224,11 +224,11 @@ class AsyncioArmClient(CommandMethods):
             if exc is None:
                 await self.aclose()
             else:
-                await self._goodbye(CloseReason.SHUTDOWN, f"controller error: {exc!r}")
+                await self._goodbye(CloseReason.SHUTDOWN, _bye_text(exc))
         except BaseException as inner:
             # Cancelled (asyncio.timeout around the block) while closing: the
             # session still ends with a BYE, and the tasks still stop.
-            await self._goodbye(CloseReason.SHUTDOWN, f"controller stopped closing: {inner!r}")
+            await self._goodbye(CloseReason.SHUTDOWN, _bye_text(inner))
             raise
         finally:
             await self._stop_tasks()
@@ -599,6 +599,13 @@ class _SessionState:
         self.granted = False
         self.ended: SessionEnded | None = None
         self.stream_error: BaseException | None = None
+
+
+def _bye_text(exc: BaseException) -> str:
+    """What the BYE tells the arm: the kind of ending, never the exception's text."""
+    if isinstance(exc, KeyboardInterrupt | asyncio.CancelledError | TimeoutError):
+        return "controller interrupted"
+    return f"controller error ({type(exc).__name__})"
 
 
 def _offer(queue: asyncio.Queue[Feedback | None], item: Feedback | None) -> bool:

@@ -85,3 +85,26 @@ def test_cancellation_injected_at_every_moment_of_open_use_and_close(
     # Most deadlines cut somewhere inside; the last ones let the block finish.
     assert landed >= len(deadlines) // 2
     assert 0 < arm.count(CommandCode.MOVE_JOINT) < len(deadlines)
+
+
+def test_the_bye_says_what_kind_of_ending_not_the_local_exception(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The client's exception text is local detail: it no longer crosses the wire."""
+    import logging
+
+    from .harness import wired
+
+    async def main() -> None:
+        async with wired(FakeArm()) as w:
+            with pytest.raises(ValueError, match="secret"):
+                async with w.client():
+                    raise ValueError("secret local detail")
+            await trio.sleep(1.0)
+
+    with caplog.at_level(logging.INFO, logger="tcpstream._server"):
+        run(main)
+    ended = [r.getMessage() for r in caplog.records if "session ended" in r.getMessage()]
+    assert ended, caplog.text
+    assert "controller error (ValueError)" in ended[0]
+    assert "secret" not in caplog.text
