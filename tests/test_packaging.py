@@ -81,7 +81,7 @@ def test_a_fresh_venv_runs_the_demo_from_the_wheel(
     assert report["ok"] is True
     assert report["commands"]["completed"] == 11
     version = _version()
-    for tool in ("serialsocket", "tcpstream"):
+    for tool in ("serialsocket", "tcpstream", "linksim"):
         said = subprocess.run(
             [str(bin_dir / tool), "--version"], capture_output=True, text=True, timeout=60
         )
