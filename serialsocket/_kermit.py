@@ -25,16 +25,23 @@ ARQ, as C-Kermit does it (ckcfn2.c input()):
   waits for its ACK (the ACK of S carries the receiver's parameters; the ACK
   of A may refuse the file).  D packets fill the window.
 * The sender resends exactly the packet a NAK names, or window-low on a
-  timeout.  A NAK for the packet after the last one sent means everything was
-  received (NAK(n+1) = ACK(n)), except while waiting for the ACK of S.  When
+  timeout.  With window 1 a NAK for the packet after the last one sent means
+  that one was received (NAK(n+1) = ACK(n)), except while waiting for the ACK
+  of S.  With windows a NAK acknowledges nothing: C-Kermit NAKs sequence
+  numbers beyond a packet it still misses, so a NAK of a packet not sent yet
+  resends window-low.  Z goes out only once every D is acknowledged, and B
+  once Z is; success means every Z was acknowledged.  When
   an ACK arrives for a packet whose every copy was sent after window-low's
   last copy, window-low is resent at once: the line keeps order, so that copy
   or its ACK was lost, and waiting for a timeout would stall the window for
   seconds on a delayed link.  (This generalises the 1985 windowing draft's
   heuristic, which did it once, for a packet never resent.)
-* The receiver ACKs every in-window packet on arrival, buffers out-of-order
+* The receiver ACKs every in-window D packet on arrival, buffers out-of-order
   ones, NAKs the oldest gap not NAKed yet, re-ACKs duplicates from the
   previous window, and on a timeout or a damaged packet NAKs window-low.
+  Every other packet (F, A, Z, B) is ACKed only when it is acted on, in
+  order: the ACK of Z says the whole file arrived, so it never goes out
+  while a D before it is missing.
 * Each packet may be retried ``retry_limit`` times (0 = forever); then the
   side sends ``E`` "Too many retries" and fails.
 """
@@ -177,6 +184,9 @@ class FileCompleted:
 class TransferComplete:
     """The batch ended normally: every file's Z was acknowledged and B was sent.
 
+    A receiver ACKs Z only once it holds every byte of the file (C-Kermit
+    after closing it), so every file is confirmed, whole, by then.
+
     ``break_acknowledged`` is False when the sender stopped waiting for the
     ACK of B (it came back damaged, or :data:`_BREAK_RETRIES` copies of B went
     unanswered): the receiver had already acknowledged every file, and most
@@ -208,6 +218,9 @@ class KermitStatistics:
         check: block check in force.
         files: files completed.
         file_bytes: file bytes sent (sender) or delivered (receiver).
+        acknowledged_bytes: file bytes the receiver has acknowledged in
+            order, every file counted (sender); file bytes delivered in
+            order and acknowledged (receiver: the same as ``file_bytes``).
         packets_sent, packets_received: packets, retransmissions included.
         retransmissions: packets sent again.
         naks_sent, naks_received: NAK packets.
@@ -225,6 +238,7 @@ class KermitStatistics:
     check: BlockCheck
     files: int
     file_bytes: int
+    acknowledged_bytes: int
     packets_sent: int
     packets_received: int
     retransmissions: int
@@ -326,9 +340,15 @@ class KermitSide(abc.ABC):
         self._on_timeout(now)
 
     def abort(self, reason: str, *, message: str | None = None) -> None:
-        """Stop the transfer now: send E with ``reason`` and fail (local cancel, bad data)."""
+        """Stop the transfer now: send E with ``reason`` and fail (local cancel, bad data).
+
+        Bytes not yet taken by :meth:`data_to_send` are dropped first: an ACK
+        still waiting there must not confirm what the caller failed to store
+        (the ACK of Z for a file that could not be written).
+        """
         if self.finished:
             return
+        self._out.clear()
         text = reason[:_MAX_ERROR_TEXT]
         enc = self._neg.send_encoding if self._neg else _PLAIN
         field, _ = enc.encode_prefix(text.encode("utf-8", "replace"), 4 * _MAX_ERROR_TEXT)
@@ -345,6 +365,7 @@ class KermitSide(abc.ABC):
             check=neg.check if neg else BlockCheck.SUM6,
             files=self._files,
             file_bytes=self._file_bytes,
+            acknowledged_bytes=self._acknowledged_bytes(),
             packets_sent=self._sent,
             packets_received=self._received,
             retransmissions=self._retransmissions,
@@ -442,6 +463,10 @@ class KermitSide(abc.ABC):
     @abc.abstractmethod
     def _error_seq(self) -> int:
         """Role hook: each side implements it."""
+
+    @abc.abstractmethod
+    def _acknowledged_bytes(self) -> int:
+        """Role hook: file bytes acknowledged in order (see :class:`KermitStatistics`)."""
 
 
 def _prefix(c: int | None) -> str | None:

@@ -6,6 +6,15 @@
 fire their timers, and do the file I/O the cores leave out.  Received files
 are written to ``NAME.part`` and renamed when their Z arrives, so an
 interrupted transfer never leaves a truncated file under the real name.
+
+Each round hands the machine's events to the caller *before* its bytes go on
+the line: the ACK of Z leaves only after the file is closed and renamed, and
+if that fails the machine aborts and the ACK is never sent.
+
+Both functions return only when the batch is complete and confirmed: every
+file's Z acknowledged (sending) or received in order after all its data
+(receiving), none of them discarded.  Anything else raises
+:class:`KermitTransferError`, whose message says how far it got.
 """
 
 from __future__ import annotations
@@ -75,23 +84,39 @@ async def _run(
     port: trio.abc.Stream,
     side: KermitSender | KermitReceiver,
     on_event: Callable[[KermitEvent], None],
+    progress: Callable[[KermitStatistics], str],
 ) -> None:
-    """Drive ``side`` until it finishes; ``on_event`` sees every event in order."""
+    """Drive ``side`` until it finishes; ``on_event`` sees every event in order.
+
+    Raises:
+        KermitTransferError: ``side`` failed; the message ends with
+            ``progress(statistics)`` (how far the transfer got).
+    """
     failure: TransferFailed | None = None
     while True:
-        out = side.data_to_send()
-        if out:
-            await port.send_all(out)
+        # Events first: the caller stores what arrived before our ACKs of it
+        # leave, and an abort while storing drops them (KermitSide.abort).
         while (event := side.next_event()) is not None:
             if isinstance(event, TransferFailed):
                 failure = event
             on_event(event)
+        out = side.data_to_send()
+        if out:
+            try:
+                await port.send_all(out)
+            except trio.BrokenResourceError as exc:
+                side.abort("Line broken", message=f"the line failed: {exc}")
+                continue
         if side.finished:
             break
         deadline = side.get_timer()
         data: bytes | bytearray = b""
         with trio.move_on_at(math.inf if deadline is None else deadline):
-            data = await port.receive_some(_READ_SIZE)
+            try:
+                data = await port.receive_some(_READ_SIZE)
+            except trio.BrokenResourceError as exc:
+                side.abort("Line broken", message=f"the line failed: {exc}")
+                continue
             if not data:
                 side.abort("Line closed", message="the line was closed (end of file on the port)")
                 continue
@@ -101,8 +126,9 @@ async def _run(
         else:
             side.handle_timer(now)
     if failure is not None:
+        stats = side.statistics()
         raise KermitTransferError(
-            failure.message, by_peer=failure.by_peer, statistics=side.statistics()
+            f"{failure.message}; {progress(stats)}", by_peer=failure.by_peer, statistics=stats
         )
 
 
@@ -118,13 +144,17 @@ async def kermit_send(
     Each file is sent under its base name, in binary mode.
 
     Returns:
-        The final counters.
+        The final counters, once the receiver has acknowledged every file
+        whole (the ACK of its Z; a Kermit receiver sends it only when it
+        holds the whole file).
 
     Raises:
         OSError: a file cannot be opened (checked for all files before the
             transfer starts).
-        KermitTransferError: the transfer failed; its ``by_peer`` says who
-            gave up.
+        KermitTransferError: the transfer failed, or the receiver refused or
+            cancelled a file; ``by_peer`` says who gave up, and the message
+            how many files the receiver confirmed and how many bytes it
+            acknowledged, left unacknowledged in flight, or never got.
     """
     config = config or KermitConfig()
     handles: list[BinaryIO] = []
@@ -136,8 +166,32 @@ async def kermit_send(
             handles.append(f)
             files.append(OutgoingFile(path.name, os.fstat(f.fileno()).st_size, f))
         sender = KermitSender(files, config, trio.current_time())
-        await _run(port, sender, on_event or _log_event)
-        return sender.statistics()
+        total = sum(f.size or 0 for f in files)
+        discarded: list[str] = []
+
+        def handle(event: KermitEvent) -> None:
+            (on_event or _log_event)(event)
+            if isinstance(event, FileCompleted) and event.discarded:
+                discarded.append(event.name)
+
+        def progress(stats: KermitStatistics) -> str:
+            unacked = stats.file_bytes - stats.acknowledged_bytes
+            return (
+                f"the receiver confirmed {stats.files - len(discarded)} of {len(files)} "
+                f"files whole; of {total} bytes, {stats.acknowledged_bytes} were acknowledged, "
+                f"{unacked} sent but not acknowledged, "
+                f"{max(total - stats.file_bytes, 0)} never sent"
+            )
+
+        await _run(port, sender, handle, progress)
+        stats = sender.statistics()
+        if discarded:
+            raise KermitTransferError(
+                f"the receiver refused or cancelled {', '.join(discarded)}; {progress(stats)}",
+                by_peer=True,
+                statistics=stats,
+            )
+        return stats
     finally:
         for f in handles:
             f.close()
@@ -156,10 +210,15 @@ async def kermit_receive(
     the same name is replaced when the new one is complete.  A file the
     sender discards (Z with ``D``) is deleted.
 
+    Returns:
+        The final counters, once the batch ended normally (B, in order after
+        every file's Z) with every file stored whole.
+
     Raises:
-        OSError: ``directory`` is not a writable directory.
+        OSError: ``directory`` is not a directory.
         KermitTransferError: the transfer failed (the partial file stays as
-            ``NAME.part``).
+            ``NAME.part``), a file could not be stored, or the sender
+            discarded a file; the message says how many files were stored.
     """
     config = config or KermitConfig()
     target = pathlib.Path(directory)
@@ -167,6 +226,9 @@ async def kermit_receive(
         raise NotADirectoryError(f"{target} is not a directory: create it or pick another")
     receiver = KermitReceiver(config, trio.current_time())
     current: list[tuple[BinaryIO, pathlib.Path, pathlib.Path]] = []
+    stored: list[str] = []
+    discarded: list[str] = []
+    written = [0]  # bytes of the file in progress
 
     def handle(event: KermitEvent) -> None:
         (on_event or _log_event)(event)
@@ -175,24 +237,49 @@ async def kermit_receive(
             part = final.with_name(final.name + ".part")
             try:
                 current.append((part.open("wb"), part, final))
+                written[0] = 0
             except OSError as exc:
                 receiver.abort("Cannot create file", message=f"cannot create {part}: {exc}")
         elif isinstance(event, FileData) and current:
-            current[-1][0].write(event.data)
+            try:
+                current[-1][0].write(event.data)
+                written[0] += len(event.data)
+            except OSError as exc:
+                receiver.abort("Cannot write file", message=f"cannot write {current[-1][1]}: {exc}")
         elif isinstance(event, FileCompleted) and current:
-            f, part, final = current.pop()
-            f.close()
-            if event.discarded:
-                part.unlink()
-            else:
-                part.replace(final)
+            f, part, final = current[-1]
+            try:
+                f.close()
+                if event.discarded:
+                    part.unlink()
+                else:
+                    part.replace(final)
+            except OSError as exc:
+                # Before the ACK of Z leaves (_run): the abort drops it.
+                receiver.abort("Cannot store file", message=f"cannot store {final}: {exc}")
+                return
+            current.pop()
+            (discarded if event.discarded else stored).append(final.name)
+
+    def progress(stats: KermitStatistics) -> str:
+        text = f"{len(stored)} files stored whole"
+        if current:
+            text += f"; {written[0]} bytes of the file in progress kept in {current[-1][1]}"
+        return text
 
     try:
-        await _run(port, receiver, handle)
+        await _run(port, receiver, handle, progress)
     finally:
         for f, _, _ in current:
             f.close()
-    return receiver.statistics()
+    stats = receiver.statistics()
+    if discarded:
+        raise KermitTransferError(
+            f"the sender cancelled {', '.join(discarded)} (deleted); {progress(stats)}",
+            by_peer=True,
+            statistics=stats,
+        )
+    return stats
 
 
 def _log_event(event: KermitEvent) -> None:
@@ -204,7 +291,11 @@ def _log_event(event: KermitEvent) -> None:
         if event.break_acknowledged:
             log.info("transfer complete")
         else:
-            log.info("transfer complete (every file acknowledged; the ACK of B was lost)")
+            # Not a failure: every file's Z was acknowledged, so the receiver
+            # holds every file whole; only the end of the batch is unconfirmed.
+            log.warning(
+                "every file was acknowledged whole, but the ACK of B (end of batch) never came"
+            )
     elif isinstance(event, TransferFailed):
         # Info, not a warning: the failure is raised (KermitTransferError) and
         # reported by whoever catches it; a warning here printed it twice.

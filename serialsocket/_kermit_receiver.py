@@ -47,6 +47,9 @@ class KermitReceiver(KermitSide):
     def _error_seq(self) -> int:
         return self._window.low
 
+    def _acknowledged_bytes(self) -> int:
+        return self._file_bytes  # delivered in order = acknowledged (D is ACKed on arrival)
+
     def _ack(self, seq: int, data: bytes = b"", *, init: bool = False) -> None:
         self._acks[seq] = self._emit(Packet(seq=seq, type=PacketType.ACK, data=data), init=init)
 
@@ -69,9 +72,16 @@ class KermitReceiver(KermitSide):
         if window.in_window(packet.seq):
             self._progress(now)
             window.hold(packet)
-            ack_data = b""
-            self._ack(packet.seq, ack_data)
+            if packet.type == PacketType.DATA:
+                # "I have it": a D is ACKed on arrival, in or out of order.
+                self._ack(packet.seq)
+            # Anything else is ACKed in _deliver, once every packet before it
+            # has arrived: the ACK of Z means "the whole file is here", of B
+            # "the batch is done" (the sender then exits).  A Z that overtook
+            # a missing D waits, unacknowledged, for the D's retransmission.
             while not self.finished and (ready := window.pop_ready()) is not None:
+                if ready.type != PacketType.DATA:
+                    self._ack(ready.seq)
                 self._deliver(ready)
             if not self.finished and (gap := window.gap_to_nak()) is not None:
                 window.naked(gap)

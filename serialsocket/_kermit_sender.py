@@ -58,12 +58,17 @@ class KermitSender(KermitSide):
     def _error_seq(self) -> int:
         return self._seq
 
-    def _send(self, ptype: str, data: bytes, now: float, *, init: bool = False) -> None:
+    def _acknowledged_bytes(self) -> int:
+        return self._window.acknowledged_bytes  # the S window before it carried no file bytes
+
+    def _send(
+        self, ptype: str, data: bytes, now: float, *, init: bool = False, file_bytes: int = 0
+    ) -> None:
         seq = self._seq
         self._seq = (seq + 1) % SEQ_MODULUS
         self._transmissions += 1
         wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
-        self._window.push(seq, wire, self._transmissions)
+        self._window.push(seq, wire, self._transmissions, file_bytes)
         self._deadline = now + self._timeout()
 
     def _on_packet(self, packet: Packet, now: float) -> None:
@@ -109,9 +114,13 @@ class KermitSender(KermitSide):
                 self._after_ack(None, now)
             elif packet.seq == self._seq:
                 # With windows a NAK acknowledges nothing: C-Kermit NAKs ahead
-                # of a packet it still misses.  Resend the oldest unacknowledged
-                # one (its NAK may have been lost); Z waits for every ACK.
+                # of a packet it still misses (issue 17, finding 9).  The packet
+                # it names was never sent, so it is at most a hint; resend the
+                # oldest unacknowledged one, as C-Kermit does (its NAK may have
+                # been lost).  Z waits for every ACK (_fill).
                 self._retransmit_oldest(now)
+            # Any other NAK names a packet already acknowledged or outside the
+            # window (a late copy): it acknowledges nothing and asks for nothing.
         # Anything else from a receiver (echoes, stray types) is ignored, as ckcfn2.c does.
 
     def _after_ack(self, ack: Packet | None, now: float) -> None:
@@ -239,7 +248,7 @@ class KermitSender(KermitSide):
             field, used = neg.send_encoding.encode_prefix(self._pending, capacity)
             del self._pending[:used]
             self._file_bytes += used
-            self._send(PacketType.DATA, field, now)
+            self._send(PacketType.DATA, field, now, file_bytes=used)
         done = self._discard or (self._eof and not self._pending)
         if done and not len(self._window):
             self._goto(KermitState.SEND_EOF)

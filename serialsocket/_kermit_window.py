@@ -32,6 +32,7 @@ class SendSlot:
             ACK for a later packet proves lost).
         retries: retransmissions so far.
         acked: an ACK arrived (the slot stays until every older slot is acked).
+        file_bytes: file bytes this packet carries (D packets; 0 for the others).
     """
 
     seq: int
@@ -40,6 +41,7 @@ class SendSlot:
     last_sent: int
     retries: int = 0
     acked: bool = False
+    file_bytes: int = 0
 
 
 class SendWindow:
@@ -52,6 +54,8 @@ class SendWindow:
     def __init__(self, size: int) -> None:
         self.size = size
         self._slots: dict[int, SendSlot] = {}  # insertion order = send order
+        self.acknowledged_bytes = 0
+        """File bytes of the packets acknowledged in order (window-low slid past them)."""
 
     def __len__(self) -> int:
         return len(self._slots)
@@ -61,9 +65,9 @@ class SendWindow:
         """No room for another packet."""
         return len(self._slots) >= self.size
 
-    def push(self, seq: int, wire: bytes, sent: int) -> None:
+    def push(self, seq: int, wire: bytes, sent: int, file_bytes: int = 0) -> None:
         """Record a newly sent packet, ``sent`` being its transmission number."""
-        self._slots[seq] = SendSlot(seq, wire, sent, sent)
+        self._slots[seq] = SendSlot(seq, wire, sent, sent, file_bytes=file_bytes)
 
     def get(self, seq: int) -> SendSlot | None:
         """The outstanding slot with this sequence number, if any."""
@@ -91,10 +95,12 @@ class SendWindow:
             if not first.acked:
                 break
             del self._slots[first.seq]
+            self.acknowledged_bytes += first.file_bytes
         return True
 
     def ack_all(self) -> None:
-        """Everything outstanding is acknowledged (NAK of the next packet = ACK)."""
+        """Everything outstanding is acknowledged (stop-and-wait's NAK(n+1) = ACK(n) only)."""
+        self.acknowledged_bytes += sum(slot.file_bytes for slot in self._slots.values())
         self._slots.clear()
 
 
