@@ -62,7 +62,11 @@ class ServerConfig:
     memory_identities: int = DEFAULT_IDENTITIES
     max_connections: int = 8
     """Simultaneous connections (one controller, the rest observers or waiting);
-    each costs three tasks and a few kB."""
+    each costs three tasks and a few kB.  One slot is always the controller's
+    (observers take at most ``max_connections - 1``); a connection never
+    granted is closed to admit a newer one when all are taken, and when every
+    slot holds a granted session one handshake is admitted beyond the limit
+    (PROTOCOL.md section 10)."""
     max_packet_rate: float | None = 200.0
     """Packets per second each connection may send, sustained; None: no limit.
     Past it the server reads that connection more slowly -- nothing is dropped;

@@ -15,7 +15,6 @@ controller is lost, and the listener keeps accepting throughout.
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import logging
 import math
@@ -99,9 +98,10 @@ class ServerStatistics:
     """Seconds those pauses added up to, over all connections: under a sustained
     flood it grows about as fast as the clock, once per flooding connection."""
     handshakes_evicted: int
-    """Connections not yet authenticated that were closed to admit a newer one
-    when the server was full (a flood of idle sockets cannot keep a controller
-    out; see PROTOCOL.md section 10)."""
+    """Connections never granted (still in their handshake, or refused and only
+    flushing the REFUSE) that were closed to admit a newer one when the server
+    was full (a flood of idle sockets cannot keep a controller out; see
+    PROTOCOL.md section 10)."""
 
 
 @dataclass(slots=True)
@@ -113,6 +113,15 @@ class _Job:
 
 
 _ARRIVALS = itertools.count()
+
+
+def _progress(link: _Link) -> int:
+    """How far a connection not granted has come (the least advanced is evicted first)."""
+    if link.conn.closed:
+        return 0  # refused: only flushing its REFUSE
+    if link.conn.state is SessionState.AWAITING_HELLO:
+        return 1
+    return 2
 
 
 class _Link:
@@ -264,9 +273,8 @@ class Server:
         if self._nursery is None:
             raise RuntimeError("use the server inside 'async with Server(...) as server:'")
         self._stats["connections_total"] += 1
-        if len(self._links) >= self.config.max_connections and not self._evict_a_handshake():
-            await self._refuse_full(stream)
-            return
+        if len(self._links) >= self.config.max_connections:
+            self._make_room()
         link = _Link(self, stream)
         self._links.add(link)
         try:
@@ -284,32 +292,34 @@ class Server:
                 link.pump.drain_events()
             self._detach(link)
 
-    def _evict_a_handshake(self) -> bool:
-        """Make room by closing the least advanced connection not yet decided.
+    def _make_room(self) -> None:
+        """The server is full: close the least advanced connection not granted.
 
         Connections that have not authenticated (or, without a key, not sent a
         well-formed HELLO) must not starve the sessions the arm exists for: a
         flood of idle or half-open sockets would otherwise keep a keyed
         controller -- above all one resuming after a blip -- out with
-        SERVER_FULL.  A connection that has not sent a complete HELLO goes
-        first, then one stuck after its HELLO; the oldest of either kind first.
-        A genuine controller completes its handshake within a round trip, so a
-        flood must open more than ``max_connections`` sockets per round trip
-        to keep it out.  Granted sessions are never evicted.
+        SERVER_FULL.  First one already refused (it is only flushing its
+        REFUSE), then one that has not sent a complete HELLO, then one stuck
+        after its HELLO; the oldest of each kind first.  A genuine controller
+        completes its handshake within a round trip, so a flood must open more
+        than ``max_connections`` sockets per round trip to keep it out.
+        Granted sessions are never evicted; when every slot holds one, the new
+        connection is admitted beyond the limit (one handshake at a time: the
+        next arrival evicts it if it is still undecided), and the grant decides
+        -- a controller always has a slot (observers take at most
+        ``max_connections - 1``; the controller's own older connection is
+        retired when it resumes).
         """
-        undecided = [ln for ln in self._links if not ln.granted.is_set() and ln.scope is not None]
+        undecided = [ln for ln in self._links if ln.role is None and ln.scope is not None]
         if not undecided:
-            return False
-        victim = min(
-            undecided,
-            key=lambda ln: (ln.conn.state is not SessionState.AWAITING_HELLO, ln.arrived),
-        )
+            return
+        victim = min(undecided, key=lambda ln: (_progress(ln), ln.arrived))
         self._stats["handshakes_evicted"] += 1
         log.info("server full: closing an unauthenticated connection to admit a new one")
         self._links.discard(victim)  # its slot is free now, whatever its close takes
         assert victim.scope is not None
         victim.scope.cancel()
-        return True
 
     async def _handshake_guard(self, link: _Link, scope: trio.CancelScope) -> None:
         # The connection's own handshake timer needs a writable stream to send its
@@ -320,22 +330,6 @@ class Server:
             return
         if not link.granted.is_set():
             scope.cancel()
-
-    async def _refuse_full(self, stream: trio.abc.Stream) -> None:
-        self._stats["refused"] += 1
-        conn = ServerConnection(self.parameters, now=trio.current_time())
-        conn.refuse(
-            RefuseReason.SERVER_FULL,
-            f"the arm serves {self.config.max_connections} connections; try again later",
-            trio.current_time(),
-        )
-        with trio.move_on_after(self.config.handshake_time()):
-            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError, OSError):
-                await stream.send_all(conn.data_to_send())
-        with trio.move_on_after(1.0) as s:
-            s.shield = True
-            with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError, OSError):
-                await stream.aclose()
 
     async def serve_listeners(
         self,
@@ -369,6 +363,18 @@ class Server:
         if role is Role.OBSERVER:
             if not self.config.allow_observers:
                 self._refuse(link, RefuseReason.BUSY, "this arm takes no observers")
+                return
+            # One slot is always the controller's: observers cannot keep it out.
+            watching = sum(
+                1 for ln in self._links if ln.role is Role.OBSERVER and not ln.conn.closed
+            )
+            if watching >= self.config.max_connections - 1:
+                self._refuse(
+                    link,
+                    RefuseReason.SERVER_FULL,
+                    f"the arm serves {watching} observers (one slot is kept for the controller); "
+                    "try again later",
+                )
                 return
         elif self._holder is not None and self._holder != identity:
             self._refuse(
