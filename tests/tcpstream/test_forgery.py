@@ -74,11 +74,16 @@ def test_a_forged_packet_in_a_live_keyed_session_changes_nothing(
     receiver = server if target == "arm" else client
     before = dataclasses.replace(receiver.statistics())
     heard = receiver.last_heard
+    timer = receiver.get_timer()
     receiver.receive_data(encode_packet(forged), 0.5)
     after = receiver.statistics()
     assert receiver.state is SessionState.OPEN, name
     assert receiver.last_heard == heard, "a forgery refreshed the dead-time timer"
-    assert after.bad_packets == before.bad_packets + 1
+    assert receiver.get_timer() == timer
+    # Counted as a bad packet and a tag failure; nothing else moved (counters).
+    assert after == dataclasses.replace(
+        before, bad_packets=before.bad_packets + 1, tag_failures=before.tag_failures + 1
+    )
     # Not answered either: a forgery gets no FAILED (no amplification).
     assert receiver.data_to_send() == b""
     # The session carries on: genuine traffic both ways is accepted.
@@ -107,3 +112,103 @@ def test_many_forgeries_do_not_end_a_keyed_session_as_garbage() -> None:
     client.close(CloseReason.NORMAL, 0.2, "done")
     server.receive_data(client.data_to_send(), 0.2)
     assert server.state is SessionState.CLOSED  # the genuine BYE still counts
+
+
+def test_a_reinjected_genuine_packet_changes_nothing() -> None:
+    """A recorded genuine packet (right tag, old counter) is dropped unanswered."""
+    client, server = _keyed_pair()
+    client.send_command(1, commands.move_joint(1, 0.1), 0.1)
+    recorded = client.data_to_send()
+    server.receive_data(recorded, 0.1)
+    while server.next_event() is not None:
+        pass
+    before = server.statistics()
+    server.receive_data(recorded, 0.5)
+    assert server.data_to_send() == b""
+    assert server.last_heard == 0.1
+    assert server.statistics() == dataclasses.replace(
+        before, bad_packets=before.bad_packets + 1, replays=before.replays + 1
+    )
+
+
+def test_a_reflected_packet_changes_nothing() -> None:
+    """The arm's own packet sent back to it: the direction byte fails the tag."""
+    client, server = _keyed_pair()
+    server.accepted(1, CommandCode.STATUS, 0, 0.1)
+    reflected = server.data_to_send()
+    before = server.statistics()
+    server.receive_data(reflected, 0.2)
+    assert server.data_to_send() == b""
+    assert server.statistics() == dataclasses.replace(
+        before, bad_packets=before.bad_packets + 1, tag_failures=before.tag_failures + 1
+    )
+    client.receive_data(reflected, 0.2)  # and it still counts where it belongs
+    assert client.statistics().last_counter_in == before.last_counter_out
+
+
+# --- the keyed handshake: after the session key exists, before the GRANT ----------
+
+
+def _challenged() -> tuple[ClientConnection, ServerConnection, bytes]:
+    """Client in AUTH_SENT, arm in CHALLENGED; the client's AUTH not yet delivered."""
+    client = ClientConnection(ControllerIdentity("ctl", 7), key=KEY)
+    server = ServerConnection(PARAMS, key=KEY)
+    client.connect(0.0)
+    server.receive_data(client.data_to_send(), 0.0)
+    client.receive_data(server.data_to_send(), 0.0)
+    assert (client.state, server.state) == (SessionState.AUTH_SENT, SessionState.CHALLENGED)
+    return client, server, client.data_to_send()
+
+
+@pytest.mark.parametrize(
+    ("name", "forged"),
+    [(n, f) for n, f in _forgeries() if f.kind is not PacketKind.AUTH],
+    ids=[n for n, f in _forgeries() if f.kind is not PacketKind.AUTH],
+)
+def test_a_forgery_to_a_challenged_arm_changes_nothing(name: str, forged: Packet) -> None:
+    """Once the arm has sent its CHALLENGE it knows Ks: anything but an AUTH
+    that does not verify is dropped, and the genuine AUTH still gets in.  (A
+    mis-tagged AUTH is refused like a wrong key: one answer for every key
+    failure, section 8.)"""
+    client, server, auth = _challenged()
+    before = server.statistics()
+    timer = server.get_timer()
+    server.receive_data(encode_packet(forged), 0.1)
+    assert server.state is SessionState.CHALLENGED, name
+    assert server.data_to_send() == b""
+    assert server.get_timer() == timer
+    assert server.statistics() == dataclasses.replace(
+        before, bad_packets=before.bad_packets + 1, tag_failures=before.tag_failures + 1
+    )
+    server.receive_data(auth, 0.2)
+    assert server.state is SessionState.AWAITING_DECISION
+    server.grant(Role.CONTROLLER, 0, 0.2, remembered=False)
+    client.receive_data(server.data_to_send(), 0.2)
+    assert client.state is SessionState.OPEN
+
+
+@pytest.mark.parametrize(
+    ("name", "forged"),
+    [(n, f) for n, f in _forgeries() if f.kind is not PacketKind.REFUSE],
+    ids=[n for n, f in _forgeries() if f.kind is not PacketKind.REFUSE],
+)
+def test_a_forgery_to_a_controller_awaiting_its_grant_changes_nothing(
+    name: str, forged: Packet
+) -> None:
+    """After its AUTH the controller knows Ks: anything but a REFUSE (which
+    the arm cannot tag) that does not verify is dropped, and the genuine
+    GRANT still opens the session."""
+    client, server, auth = _challenged()
+    before = client.statistics()
+    timer = client.get_timer()
+    client.receive_data(encode_packet(forged), 0.1)
+    assert client.state is SessionState.AUTH_SENT, name
+    assert client.data_to_send() == b""
+    assert client.get_timer() == timer
+    assert client.statistics() == dataclasses.replace(
+        before, bad_packets=before.bad_packets + 1, tag_failures=before.tag_failures + 1
+    )
+    server.receive_data(auth, 0.2)
+    server.grant(Role.CONTROLLER, 0, 0.2, remembered=False)
+    client.receive_data(server.data_to_send(), 0.2)
+    assert client.state is SessionState.OPEN
