@@ -192,15 +192,21 @@ class _Connection(abc.ABC):
                 self._reject(exc.reason, exc.message, exc.request_id, now)
                 continue
             except PacketError as exc:
-                # The magic was right, so the framing holds: skip exactly one packet.
-                del self._inbuf[:PACKET_SIZE]
                 if not self._tag_holds(raw):
                     # Keyed, and not from the peer: nothing may change (see
                     # _accept_packet), not even an answer or the garbage count.
                     self._stats["tag_failures"] += 1
                     self._drop_forgery(f"undecodable and unauthenticated: {exc.message}")
+                    self._skip_unverified()
                     continue
+                # The magic was right, so the framing holds: skip exactly one packet.
+                del self._inbuf[:PACKET_SIZE]
                 self._undecodable(exc, raw, exc.request_id, now)
+                continue
+            if self._forged(packet, raw):
+                self._stats["tag_failures"] += 1
+                self._drop_forgery(f"{packet.kind.name}: authentication tag mismatch")
+                self._skip_unverified()
                 continue
             del self._inbuf[:PACKET_SIZE]
             self._accept_packet(packet, raw, now)
@@ -315,6 +321,25 @@ class _Connection(abc.ABC):
         # this protocol).  Skip to the next b"TL" after the current position;
         # a false match in the data just fails again and is counted again.
         self._stats["resyncs"] += 1
+        self._skip_to_magic()
+
+    def _skip_unverified(self) -> None:
+        """Skip a keyed packet that did not verify.
+
+        In an open session its bytes need not be a packet the peer framed: a
+        fragment injected into the stream is completed by the start of the next
+        genuine packet.  So look for the next magic after its first byte, as a
+        resync does (not counted as one: it is no fault of the peer), rather
+        than skip a whole packet and lose the genuine one.  A false match fails
+        the tag again.  In the handshake, where an unauthenticated peer could
+        make this cost a tag check per two bytes, one whole packet is skipped.
+        """
+        if self._state is SessionState.OPEN:
+            self._skip_to_magic()
+        else:
+            del self._inbuf[:PACKET_SIZE]
+
+    def _skip_to_magic(self) -> None:
         at = self._inbuf.find(MAGIC, 1)
         if at < 0:
             keep = 1 if self._inbuf.endswith(MAGIC[:1]) else 0
@@ -328,9 +353,9 @@ class _Connection(abc.ABC):
         self._reject(exc.reason, exc.message, request_id, now)
 
     def _tag_holds(self, raw: bytes) -> bool:
-        """Whether an undecodable packet's request id may be believed: always
-        without a key, and with one only if its tag verifies (the tag covers the
-        raw bytes, so it can be checked even when the words cannot be decoded)."""
+        """Whether a packet's tag verifies, or there is no key to check it with.
+        The tag covers the raw bytes, so it can be checked even when the words
+        cannot be decoded (and an undecodable packet's request id believed)."""
         if self._session_key is None:
             return True
         expected = _auth.packet_tag(self._session_key, self._recv_dir, raw[:SIGNED_SIZE])
@@ -353,19 +378,24 @@ class _Connection(abc.ABC):
     ) -> None:
         """The arm answers a rejected packet with FAILED; the controller only counts it."""
 
+    def _forged(self, packet: Packet, raw: bytes) -> bool:
+        """Whether a decoded packet of a keyed session fails its tag.
+
+        Checked before anything else: once the session is keyed, nothing about
+        it -- the counter, the dead-time timer, the garbage count, an answer --
+        changes for a packet that does not verify.  A kind that is never tagged
+        (CHALLENGE, REFUSE) is accepted only where the handshake expects it,
+        before the session key exists or, for REFUSE, while the arm may still
+        turn a bad AUTH away.
+        """
+        return (
+            self._session_key is not None
+            and not self._may_be_untagged(packet.kind)
+            and not self._tag_holds(raw)
+        )
+
     def _accept_packet(self, packet: Packet, raw: bytes, now: float) -> None:
-        # Tag first, then the counter, then meaning.  Once the session is keyed,
-        # nothing about it -- the counter, the dead-time timer, the garbage
-        # count, an answer -- changes for a packet that does not verify: a kind
-        # that is never tagged (CHALLENGE, REFUSE) is accepted only where the
-        # handshake expects it, before the session key exists or, for REFUSE,
-        # while the arm may still turn a bad AUTH away.
-        if self._session_key is not None and not self._may_be_untagged(packet.kind):
-            expected = _auth.packet_tag(self._session_key, self._recv_dir, raw[:SIGNED_SIZE])
-            if not _auth.verify(expected, packet.tag):
-                self._stats["tag_failures"] += 1
-                self._drop_forgery(f"{packet.kind.name}: authentication tag mismatch")
-                return
+        # The tag was checked first (_forged), then the counter, then meaning.
         if packet.counter <= self._counter_in:
             self._stats["replays"] += 1
             why = f"counter {packet.counter} is not above {self._counter_in}: replayed or reordered"
@@ -399,7 +429,8 @@ class _Connection(abc.ABC):
         self._dispatch(packet, now)
 
     def _may_be_untagged(self, kind: PacketKind) -> bool:
-        """Whether ``kind`` may arrive untagged in this state of a keyed session."""
+        """Whether ``kind`` skips the shared tag check in this state of a keyed
+        session (it may arrive untagged, or the role checks it itself)."""
         return False
 
     def _drop_forgery(self, message: str) -> None:

@@ -277,6 +277,10 @@ class ServerConnection(_Connection):
         self._move(Trigger.AUTH_IN)
         self._events.append(ControlRequested(self.identity, self._wanted))
 
+    def _may_be_untagged(self, kind: PacketKind) -> bool:
+        # The AUTH's tag is checked by _accept_packet: a bad one is a wrong key.
+        return kind is PacketKind.AUTH and self._state is SessionState.CHALLENGED
+
     def _accept_packet(self, packet: Packet, raw: bytes, now: float) -> None:
         # A wrong key shows first as a bad AUTH tag: answer it exactly like a wrong
         # proof (one refusal text for every key failure), not as a counted bad packet.

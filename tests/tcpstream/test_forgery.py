@@ -212,3 +212,37 @@ def test_a_forgery_to_a_controller_awaiting_its_grant_changes_nothing(
     server.grant(Role.CONTROLLER, 0, 0.2, remembered=False)
     client.receive_data(server.data_to_send(), 0.2)
     assert client.state is SessionState.OPEN
+
+
+@pytest.mark.parametrize("cut", [2, 4, 100, 215])
+@pytest.mark.parametrize("target", ["arm", "controller"])
+def test_an_injected_fragment_costs_no_genuine_packet(target: str, cut: int) -> None:
+    """A middlebox injects part of a packet: the next genuine packet completes
+    the forged 216 bytes, which do not verify.  Skipping a whole packet then
+    lost the genuine one (a COMMAND never answered); now the receiver looks for
+    the next magic inside the unverified bytes and loses nothing."""
+    client, server = _keyed_pair()
+    fragment = encode_packet(Packet(PacketKind.HEARTBEAT, counter=HUGE))[:cut]
+    if target == "arm":
+        client.send_command(1, commands.move_joint(1, 0.1), 0.5)
+        client.send_command(2, commands.move_joint(1, 0.2), 0.5)
+        receiver, genuine = server, client.data_to_send()
+    else:
+        server.accepted(1, CommandCode.MOVE_JOINT, 0, 0.5)
+        server.accepted(2, CommandCode.MOVE_JOINT, 1, 0.5)
+        receiver, genuine = client, server.data_to_send()
+    before = receiver.statistics()
+    receiver.receive_data(fragment + genuine, 0.5)
+    ids = []
+    while (ev := receiver.next_event()) is not None:
+        if hasattr(ev, "request_id") and type(ev).__name__ in ("CommandReceived", "Accepted"):
+            ids.append(ev.request_id)
+    assert ids == [1, 2]
+    assert receiver.state is SessionState.OPEN
+    assert receiver.data_to_send() == b""  # nothing answered to the fragment
+    after = receiver.statistics()
+    assert after.last_counter_in == before.last_counter_in + 2
+    assert (after.bad_packets, after.tag_failures) == (
+        before.bad_packets + 1,
+        before.tag_failures + 1,
+    )
