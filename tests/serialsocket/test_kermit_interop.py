@@ -27,7 +27,10 @@ import random
 
 import pytest
 
-from linksim.bench._kermit import TransferSetup, available, run_transfer
+try:  # linksim's sub-package layout (being committed alongside)
+    from linksim.bench._kermit import TransferSetup, available, run_transfer
+except ModuleNotFoundError:  # the flat layout before it
+    from linksim._bench_kermit import TransferSetup, available, run_transfer  # type: ignore[no-redef]
 from serialsocket import KermitStatistics
 
 _REASON = {
