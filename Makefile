@@ -64,7 +64,7 @@ fuzz: fuzz-install
 SOAK_HOURS ?= 24
 
 soak: $(STAMP)
-	$(PY) -m linksim._soak --hours $(SOAK_HOURS)
+	$(PY) -m linksim soak --hours $(SOAK_HOURS)
 
 # Benchmarks measure speed; they are not tests.  `make bench` runs the quick ones.
 bench: bench-codec bench-pty bench-latency bench-flood

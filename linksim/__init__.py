@@ -1,22 +1,25 @@
-"""linksim: the world around the link -- impaired lines, a pty relay, simulated modems, benchmarks.
+"""linksim: the world around the link -- impaired lines, a simulated arm, the control
+station, whole-stack programs and benchmarks.
 
-* :class:`LinkConfig` / :class:`DirectionConfig`: impairment parameters, presets, TOML.
-* :class:`LinkDirection`: the sans-I/O impairment engine (one per direction).
-* :func:`open_impaired_link`: two connected trio streams over an impaired line.
-* :func:`run_relay`: the same line between two real ptys (``linksim relay``).
-* :class:`ModemPair`: two emulated Hayes modems joined by the line (``linksim relay --modem``).
-* :func:`serial_socket_pair`: two connected serial sockets over an impaired line.
-* :class:`SimulatedArm`: a PUMA 560 with a gripper in a world of boxes and
-  objects (:class:`WorldConfig`), the :class:`tcpstream.Executor` the command
-  server calls; :func:`rock_task`: seed 000's task script.
-* :func:`run_demo` (``linksim demo``), :class:`TaskRun`: a task script run
-  pipelined through an arm client, with a record of every command.
-* The operator console (``linksim console``): :func:`preview` plays commands
-  on a local copy of the arm (:class:`PreviewReport`); :class:`Predictor`
-  keeps the predicted state ahead of the confirmed one and records
-  :class:`Divergence`; :class:`ConsoleSession` / :class:`ConsoleSnapshot`
-  draw it; :class:`TelemetryLog` / :func:`read_log` write and read the
-  JSON-lines log (``linksim plot``).
+This face holds what a program that uses linksim most often needs; each
+sub-package has its own face with the rest:
+
+* :mod:`linksim.link`: the impaired line.  :class:`LinkConfig` /
+  :class:`DirectionConfig` / :class:`Outage` (:data:`PRESETS`, TOML, a bad
+  value is a :class:`ConfigError`); :func:`open_impaired_link`,
+  :func:`serial_socket_pair` (endpoints fitted to the line by
+  :func:`endpoint_config_for`); :func:`run_relay` between two ptys;
+  :class:`ModemPair` / :class:`ModemConfig`, emulated Hayes modems.
+* :mod:`linksim.arm`: :class:`SimulatedArm`, a PUMA 560 in a world of boxes
+  and objects (:class:`WorldConfig`, :data:`DEFAULT_WORLD`);
+  :func:`rock_task`, seed 000's task script.
+* :mod:`linksim.control`: :class:`TaskRun`, a task script run pipelined
+  through an arm client; the operator console's preview and prediction.
+* :mod:`linksim.demo`: :func:`run_demo` (``linksim demo``,
+  :class:`DemoOptions`) and :func:`run_console` (``linksim console``,
+  :class:`ConsoleOptions`).
+* :mod:`linksim.bench`: benchmarks and the soak.
+* :mod:`linksim.cli`: the ``linksim`` command.
 """
 
 from importlib.metadata import PackageNotFoundError as _NotInstalled
@@ -29,89 +32,39 @@ except _NotInstalled:  # imported from a source tree that was never installed
     __version__ = "0+unknown"
 
 
-from ._arm import ArmStatistics, SimulatedArm
-from ._channel import ImpairedLink, LinkEnd, LinkStatistics, open_impaired_link
-from ._config import (
+from ._errors import ConfigError
+from .arm import DEFAULT_WORLD, SimulatedArm, WorldConfig, rock_task
+from .control import TaskRun
+from .demo import ConsoleOptions, DemoOptions, run_console, run_demo
+from .link import (
     PRESETS,
-    ConfigError,
     DirectionConfig,
-    FaultAction,
-    GilbertElliott,
     LinkConfig,
-    Outage,
-    ScriptedFault,
-)
-from ._console import ConsoleSession, ConsoleSnapshot
-from ._console_run import ConsoleOptions, ConsoleResult, run_console
-from ._control import CommandRecord, CommandState, TaskRun
-from ._demo import DemoOptions, DemoReport, run_demo
-from ._impair import DirectionStatistics, LinkDirection
-from ._kinematics import PUMA560, ArmModel
-from ._modem import (
-    TRANSITIONS,
-    CallOutcome,
     ModemConfig,
     ModemPair,
-    ModemState,
-    ModemStateError,
+    Outage,
+    endpoint_config_for,
+    open_impaired_link,
+    run_relay,
+    serial_socket_pair,
 )
-from ._pair import endpoint_config_for, serial_socket_pair
-from ._predict import Divergence, Predictor
-from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
-from ._relay import RelayStatistics, run_relay
-from ._tasks import RockTask, rock_task
-from ._telemetry_log import TelemetryLog, read_log
-from ._world import DEFAULT_WORLD, ObjectSpec, ObstacleSpec, WorldConfig
 
 __all__ = [
     "DEFAULT_WORLD",
     "PRESETS",
-    "PUMA560",
-    "TRANSITIONS",
-    "ArmModel",
-    "ArmStatistics",
-    "CallOutcome",
-    "CommandRecord",
-    "CommandState",
     "ConfigError",
     "ConsoleOptions",
-    "ConsoleResult",
-    "ConsoleSession",
-    "ConsoleSnapshot",
     "DemoOptions",
-    "DemoReport",
     "DirectionConfig",
-    "DirectionStatistics",
-    "Divergence",
-    "FaultAction",
-    "GilbertElliott",
-    "ImpairedLink",
     "LinkConfig",
-    "LinkDirection",
-    "LinkEnd",
-    "LinkStatistics",
-    "ModelState",
     "ModemConfig",
     "ModemPair",
-    "ModemState",
-    "ModemStateError",
-    "ObjectSpec",
-    "ObstacleSpec",
     "Outage",
-    "PredictedOutcome",
-    "Predictor",
-    "PreviewReport",
-    "RelayStatistics",
-    "RockTask",
-    "ScriptedFault",
     "SimulatedArm",
     "TaskRun",
-    "TelemetryLog",
     "WorldConfig",
     "endpoint_config_for",
     "open_impaired_link",
-    "preview",
-    "read_log",
     "rock_task",
     "run_console",
     "run_demo",

@@ -1,7 +1,7 @@
-"""``python -m linksim``: see :mod:`linksim._cli`."""
+"""``python -m linksim``: see :mod:`linksim.cli`."""
 
 import sys
 
-from ._cli import main
+from .cli import main
 
 sys.exit(main())

@@ -20,10 +20,11 @@ from typing import Any
 
 import pytest
 
-from linksim import LinkConfig, _bench_goodput, _soak
-from linksim import _cli as linksim_cli
-from linksim import _cliargs as link_args
-from linksim._config import ConfigError, DirectionConfig
+from linksim import ConfigError, DirectionConfig, LinkConfig
+from linksim.cli import _args as link_args
+from linksim.cli import _bench as bench_cli
+from linksim.cli import _link as link_options
+from linksim.cli import _main as linksim_cli
 from serialsocket import EndpointConfig
 from serialsocket import _cli as serial_cli
 from serialsocket import _cliargs as serial_args
@@ -217,7 +218,7 @@ def test_unreadable_config_files_are_config_errors(tmp_path: pathlib.Path) -> No
 # The cases are not written by hand: the parsers are walked (subcommands and
 # all) and each option's ``type=`` says which values lie outside it.  An option
 # whose type the generator does not know fails test_every_option_is_classified
-# until it gets a range-checked converter (linksim/_cliargs.py,
+# until it gets a range-checked converter (linksim/cli/_args.py,
 # serialsocket/_cliargs.py) or a line in FREE_TEXT saying where it is checked.
 
 Main = Callable[[list[str]], int]
@@ -226,21 +227,16 @@ COMMANDS: list[tuple[str, Callable[[], argparse.ArgumentParser], Main]] = [
     ("linksim", linksim_cli.build_parser, linksim_cli.main),
     ("serialsocket", serial_cli._parser, serial_cli.main),
     ("tcpstream", tcp_cli._parser, tcp_cli.main),
-    ("soak", _soak.build_parser, _soak.main),
 ]
 
 PARSER_MODULES = {
     # Modules that build an ArgumentParser, and the command above that reaches
     # their options; a new command line must be added to COMMANDS.
-    "linksim/_cli.py": "linksim",
-    "linksim/_soak.py": "soak",
+    # (linksim's subcommands, the soak and the benchmarks among them, add their
+    # options in other linksim/cli/ modules; only _main.py builds the parser.)
+    "linksim/cli/_main.py": "linksim",
     "serialsocket/_cli.py": "serialsocket",
     "tcpstream/_cli.py": "tcpstream",
-    # These three build one only under __main__, from the add_arguments that
-    # `linksim bench kermit|latency|pty` use.
-    "linksim/_bench_kermit.py": "linksim",
-    "linksim/_bench_latency.py": "linksim",
-    "linksim/_bench_pty.py": "linksim",
 }
 
 FLAGS = (
@@ -283,9 +279,9 @@ PORT_NAMES = (link_args.SerialPortName, serial_args.SerialPortName)
 
 CUSTOM: dict[object, list[str]] = {
     # Hand-written converters and the values they must refuse.
-    linksim_cli._burst: ["x:y", "0.1", "0.1:0.2:0.3:0.4:0.5", "2:0.5", "nan:0.5", "0.1:inf"],
-    linksim_cli._outage: ["x", "5:1", "-1:2", "1:2:3", "nan:1", "1:inf"],
-    _bench_goodput._length: ["x", "5", "100000", "nan", ""],
+    link_options._burst: ["x:y", "0.1", "0.1:0.2:0.3:0.4:0.5", "2:0.5", "nan:0.5", "0.1:inf"],
+    link_options._outage: ["x", "5:1", "-1:2", "1:2:3", "nan:1", "1:inf"],
+    bench_cli._length: ["x", "5", "100000", "nan", ""],
     serial_cli._check: ["0", "4", "x", ""],
 }
 

@@ -2,7 +2,7 @@
 
 Three simulated minutes of noisy-moon with a 30 s and a 300 s outage (one
 every 72 s), command traffic and bulk data both ways, on the virtual clock.
-The same :func:`linksim._soak.check` verdict as the full soak: every bulk
+The same :func:`linksim.bench.check_soak` verdict as the full soak: every bulk
 byte verified in order, no command executed twice, one deadman stop in each
 outage longer than the deadman and no other halt but the shutdown's, no error.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-from linksim import _soak
+from linksim.bench import _soak
 
 
 @pytest.fixture(scope="module")

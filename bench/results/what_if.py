@@ -41,7 +41,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from linksim._bench_grid import Point, run_point
+from linksim.bench import Point, run_point
 from serialsocket import _endpoint, _sender
 from serialsocket._packet import Packet
 

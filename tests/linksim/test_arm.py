@@ -13,19 +13,17 @@ import trio.testing
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from linksim._arm import SimulatedArm
-from linksim._collision import first_collision
-from linksim._kinematics import (
-    PUMA560,
+from linksim import DEFAULT_WORLD, SimulatedArm, WorldConfig
+from linksim.arm import PUMA560, hand_frame
+from linksim.arm._collision import first_collision
+from linksim.arm._kinematics import (
     SINGULAR_THRESHOLDS,
     Singularity,
     frame_from_psa,
-    hand_frame,
     inverse,
     singular_region,
 )
-from linksim._trajectory import CHECKPOINTS, QUINTIC_PEAK_RATE
-from linksim._world import DEFAULT_WORLD, WorldConfig
+from linksim.arm._trajectory import CHECKPOINTS, QUINTIC_PEAK_RATE
 from tcpstream._commands import (
     Command,
     CommandCode,

@@ -11,11 +11,8 @@ import pytest
 import trio
 import trio.testing
 
-from linksim import LinkConfig, serial_socket_pair
-from linksim._arm import SimulatedArm
-from linksim._kinematics import hand_frame
-from linksim._tasks import rock_task
-from linksim._world import DEFAULT_WORLD
+from linksim import DEFAULT_WORLD, LinkConfig, SimulatedArm, rock_task, serial_socket_pair
+from linksim.arm import hand_frame
 from tcpstream import (
     Command,
     CommandCode,

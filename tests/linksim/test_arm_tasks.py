@@ -7,10 +7,9 @@ import pytest
 import trio
 import trio.testing
 
-from linksim._arm import SimulatedArm
-from linksim._kinematics import frame_from_psa, hand_frame, inverse
-from linksim._tasks import rock_task
-from linksim._world import DEFAULT_WORLD
+from linksim import DEFAULT_WORLD, SimulatedArm, rock_task
+from linksim.arm import hand_frame
+from linksim.arm._kinematics import frame_from_psa, inverse
 from tcpstream._commands import Command, CommandCode, CommandFailed, CommandResult, FailureReason
 
 
@@ -103,8 +102,8 @@ def test_an_added_obstacle_is_refused_then_passed_over_an_intermediate_point() -
 
 def test_the_planner_previews_the_approach_without_trio() -> None:
     """A local predictive model calls the same planner the arm runs (no clock needed)."""
-    from linksim._planner import plan_cartesian_path
-    from linksim._world import World
+    from linksim.arm._planner import plan_cartesian_path
+    from linksim.arm._world import World
 
     task = rock_task(DEFAULT_WORLD)
     approach = task.commands[1]

@@ -12,9 +12,9 @@ import pytest
 import trio
 import trio.testing
 
-from linksim._arm import SimulatedArm
-from linksim._config import ConfigError
-from linksim._world import DEFAULT_WORLD, MAX_OBSTACLES, ObjectSpec, ObstacleSpec, WorldConfig
+from linksim import DEFAULT_WORLD, ConfigError, SimulatedArm, WorldConfig
+from linksim.arm import ObjectSpec, ObstacleSpec
+from linksim.arm._world import MAX_OBSTACLES
 from tcpstream._commands import Command, CommandCode, CommandFailed, FailureReason
 
 HOME = DEFAULT_WORLD.initial_joints

@@ -16,21 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linksim._bench_grid import (
-    BASE,
-    QUICK,
-    ROW_KEYS,
-    SWEEPS,
-    Point,
-    auto_packet_length,
-    build_grid,
-    command_records,
-    default_window,
-    run_point,
-)
-from linksim._bench_transfer import BENCH_BURST, packet_error_probability
-from linksim._config import DirectionConfig, GilbertElliott
-from linksim._impair import LinkDirection
+from linksim import DirectionConfig
+from linksim.bench import SWEEPS, Point, auto_packet_length, run_point
+from linksim.bench._grid import BASE, QUICK, ROW_KEYS, build_grid, command_records, default_window
+from linksim.bench._transfer import BENCH_BURST, packet_error_probability
+from linksim.link import GilbertElliott, LinkDirection
 
 TINY = [
     "--rate",
@@ -117,7 +107,7 @@ def test_plot_writes_png(tmp_path: Path) -> None:
 
 
 def test_plot_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
-    from linksim import _plot
+    from linksim.bench import _plot as _plot
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     row = run_point(Point(9600, 0.0, 0.0, False, 4, 128, size=500))

@@ -7,12 +7,13 @@ import json
 
 import pytest
 
-from linksim import _bench_kermit
+from linksim.bench import _kermit as _bench_kermit
+from linksim.cli import _bench as bench_cli
 
 
 def _args(*argv: str) -> argparse.Namespace:
     ap = argparse.ArgumentParser()
-    _bench_kermit.add_arguments(ap)
+    bench_cli.add_kermit_arguments(ap)
     return ap.parse_args(list(argv))
 
 
@@ -21,7 +22,7 @@ def test_bench_kermit_emits_json(capsys: pytest.CaptureFixture[str]) -> None:
     if not _bench_kermit.available("ckermit"):
         pytest.skip("ckermit not installed: .ci/run installs it (apt-get install ckermit)")
     args = _args("--size", "20000", "--runs", "1", "--delay", "0.02", "--ber", "0", "--json")
-    assert _bench_kermit.main(args) == 0
+    assert bench_cli.kermit_main(args) == 0
     record = json.loads(capsys.readouterr().out)
     assert record["benchmark"] == "kermit"
     assert record["bytes"] == 20000
@@ -39,5 +40,5 @@ def test_bench_kermit_emits_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_bench_kermit_rejects_a_bad_pairing(capsys: pytest.CaptureFixture[str]) -> None:
-    assert _bench_kermit.main(_args("--pairs", "ours->xmodem")) == 2
+    assert bench_cli.kermit_main(_args("--pairs", "ours->xmodem")) == 2
     assert "bad pairing 'ours->xmodem'" in capsys.readouterr().err

@@ -12,7 +12,9 @@ def test_bench_latency_json() -> None:
         [
             sys.executable,
             "-m",
-            "linksim._bench_latency",
+            "linksim",
+            "bench",
+            "latency",
             "--json",
             "--count",
             "40",

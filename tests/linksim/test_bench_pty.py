@@ -9,14 +9,14 @@ import sys
 
 import pytest
 
-from linksim import _bench_pty
+from linksim.cli import _bench as bench_cli
 
 
 def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
     ap = argparse.ArgumentParser()
-    _bench_pty.add_arguments(ap)
+    bench_cli.add_pty_arguments(ap)
     args = ap.parse_args(["--json", "--size", "5000", "--runs", "3"])
-    assert _bench_pty.main(args) == 0
+    assert bench_cli.pty_main(args) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["benchmark"] == "pty"
     assert [r["max_packet_length"] for r in report["results"]] == [128, 4096]
@@ -30,7 +30,7 @@ def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_bench_pty_rejects_bad_sizes(capsys: pytest.CaptureFixture[str]) -> None:
     ap = argparse.ArgumentParser()
-    _bench_pty.add_arguments(ap)
+    bench_cli.add_pty_arguments(ap)
     with pytest.raises(SystemExit) as info:
         ap.parse_args(["--size", "0"])
     assert info.value.code == 2

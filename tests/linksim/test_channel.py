@@ -8,8 +8,8 @@ import pytest
 import trio
 import trio.testing
 
-from linksim import DirectionConfig, LinkConfig, LinkEnd, open_impaired_link
-from linksim._channel import ImpairedLink
+from linksim import DirectionConfig, LinkConfig, open_impaired_link
+from linksim.link import ImpairedLink, LinkEnd
 
 
 def run_virtual(fn: Callable[[], Awaitable[None]]) -> None:

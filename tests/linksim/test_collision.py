@@ -6,8 +6,9 @@ import numpy as np
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from linksim._collision import Collision, first_collision, segments_hit_boxes
-from linksim._kinematics import PUMA560, link_points
+from linksim.arm import PUMA560
+from linksim.arm._collision import Collision, first_collision, segments_hit_boxes
+from linksim.arm._kinematics import link_points
 
 coord = st.floats(-1.0, 1.0, allow_nan=False)
 point = st.tuples(coord, coord, coord).map(np.array)

@@ -7,17 +7,10 @@ import pathlib
 
 import pytest
 
-from linksim import (
-    PRESETS,
-    ConfigError,
-    DirectionConfig,
-    FaultAction,
-    GilbertElliott,
-    LinkConfig,
-    Outage,
-    ScriptedFault,
-)
-from linksim._cli import build_parser, config_from_args
+from linksim import PRESETS, ConfigError, DirectionConfig, LinkConfig, Outage
+from linksim.cli import build_parser
+from linksim.cli._main import config_from_args
+from linksim.link import FaultAction, GilbertElliott, ScriptedFault
 
 
 def test_presets_are_exactly_the_issues_list() -> None:

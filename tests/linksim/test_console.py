@@ -12,18 +12,11 @@ import re
 import pytest
 from rich.console import Console
 
-from linksim import (
-    DEFAULT_WORLD,
-    ConsoleSession,
-    ConsoleSnapshot,
-    ObjectSpec,
-    TaskRun,
-    preview,
-    rock_task,
-)
-from linksim._cli import main
-from linksim._console import CommandRow, render, render_plain, render_text
-from linksim._kinematics import PUMA560
+from linksim import DEFAULT_WORLD, TaskRun, rock_task
+from linksim.arm import PUMA560, ObjectSpec
+from linksim.cli import main
+from linksim.control import ConsoleSession, ConsoleSnapshot, preview
+from linksim.control._console import CommandRow, render, render_plain, render_text
 from tcpstream import CommandResult, Feedback
 
 HOME = Feedback(

@@ -8,7 +8,7 @@ import pytest
 import trio
 import trio.testing
 
-import linksim._virtual as virtual
+import linksim.link._virtual as virtual
 from linksim import TaskRun
 from tcpstream import (
     ArmClient,

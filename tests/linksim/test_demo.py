@@ -11,7 +11,8 @@ import sys
 
 import pytest
 
-from linksim import DEFAULT_WORLD, DemoOptions, LinkConfig, ObjectSpec, rock_task, run_demo
+from linksim import DEFAULT_WORLD, DemoOptions, LinkConfig, rock_task, run_demo
+from linksim.arm import ObjectSpec
 from tcpstream import PACKET_SIZE
 
 LINKSIM = [sys.executable, "-m", "linksim"]

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from linksim import DemoOptions, LinkConfig, run_demo
-from linksim._config import Outage
+from linksim import DemoOptions, LinkConfig, Outage, run_demo
 
 
 def test_a_link_that_dies_is_reported_as_the_link_failing() -> None:

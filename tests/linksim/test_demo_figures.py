@@ -39,7 +39,7 @@ def test_the_human_report_is_on_stdout_and_progress_on_stderr(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """Issue 19: ``linksim demo > run.txt`` kept nothing; results now go to stdout."""
-    from linksim._cli import main
+    from linksim.cli import main
 
     assert main(["demo", "--virtual", "--plain"]) == 0
     out, err = capsys.readouterr()

@@ -5,14 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from linksim import (
-    DirectionConfig,
-    FaultAction,
-    GilbertElliott,
-    LinkDirection,
-    Outage,
-    ScriptedFault,
-)
+from linksim import DirectionConfig, Outage
+from linksim.link import FaultAction, GilbertElliott, LinkDirection, ScriptedFault
 
 N = 1_000_000
 

@@ -9,7 +9,8 @@ conformance check failed with corrupted packets and, at last, a dead link).
 
 from __future__ import annotations
 
-from linksim import DirectionConfig, LinkDirection
+from linksim import DirectionConfig
+from linksim.link import LinkDirection
 
 
 def test_receive_with_a_slightly_earlier_now_does_not_repeat_bytes() -> None:

@@ -10,19 +10,17 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from linksim._kinematics import (
-    PUMA560,
+from linksim.arm import PUMA560, hand_frame, psa
+from linksim.arm._kinematics import (
     SINGULAR_THRESHOLDS,
     Singularity,
     branch,
     check_limits,
     frame_from_psa,
-    hand_frame,
     inverse,
     inverse_candidates,
     jacobian,
     link_points,
-    psa,
     rotation_about,
     singular_region,
     singularity_measures,
@@ -227,7 +225,7 @@ def test_kinematics_planning_and_world_modules_are_pure() -> None:
     import ast
     import pathlib
 
-    root = pathlib.Path(__file__).resolve().parents[2] / "linksim"
+    root = pathlib.Path(__file__).resolve().parents[2] / "linksim" / "arm"
     forbidden = {"trio", "serial", "socket", "time", "random", "threading", "asyncio", "os"}
     for module in ("_kinematics", "_trajectory", "_collision", "_world", "_tasks", "_planner"):
         names: set[str] = set()
@@ -236,7 +234,7 @@ def test_kinematics_planning_and_world_modules_are_pure() -> None:
                 names |= {a.name.split(".")[0] for a in node.names}
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names.add(node.module.split(".")[0])
-        assert not names & forbidden, f"linksim/{module}.py imports {names & forbidden}"
+        assert not names & forbidden, f"linksim/arm/{module}.py imports {names & forbidden}"
 
 
 @given(joint_vectors())

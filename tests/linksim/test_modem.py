@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from linksim import CallOutcome, ModemConfig, ModemPair, ModemState
+from linksim import ModemConfig, ModemPair
+from linksim.link import CallOutcome, ModemState
 
 OK = b"\r\nOK\r\n"
 

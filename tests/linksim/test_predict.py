@@ -17,17 +17,15 @@ import pytest
 from linksim import (
     DEFAULT_WORLD,
     ConsoleOptions,
-    ConsoleResult,
     DemoOptions,
     DirectionConfig,
     LinkConfig,
-    Predictor,
     WorldConfig,
-    preview,
-    read_log,
     rock_task,
     run_console,
 )
+from linksim.control import Predictor, preview, read_log
+from linksim.demo import ConsoleResult
 from tcpstream import Command, CommandCode
 
 TASK = rock_task(DEFAULT_WORLD).commands

@@ -18,13 +18,12 @@ from linksim import (
     DEFAULT_WORLD,
     DirectionConfig,
     LinkConfig,
-    ModelState,
     SimulatedArm,
     WorldConfig,
     open_impaired_link,
-    preview,
     rock_task,
 )
+from linksim.control import ModelState, preview
 from tcpstream import (
     Command,
     CommandCode,

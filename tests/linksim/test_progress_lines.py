@@ -8,8 +8,7 @@ import io
 from rich.console import Console
 
 from linksim import TaskRun
-from linksim._control import CommandState
-from linksim._progress import Progress
+from linksim.control import CommandState, Progress
 from tcpstream import commands
 
 

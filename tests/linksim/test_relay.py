@@ -13,16 +13,8 @@ from collections.abc import Awaitable, Callable
 import pytest
 import trio
 
-from linksim import (
-    DirectionConfig,
-    FaultAction,
-    LinkConfig,
-    ModemConfig,
-    ModemPair,
-    RelayStatistics,
-    ScriptedFault,
-    run_relay,
-)
+from linksim import DirectionConfig, LinkConfig, ModemConfig, ModemPair, run_relay
+from linksim.link import FaultAction, RelayStatistics, ScriptedFault
 
 # Generous bounds: these tests move a few KB; a limit is only there to stop a hang.
 LIMIT = 20.0

@@ -7,10 +7,10 @@ import pathlib
 
 import pytest
 
-from linksim import DEFAULT_WORLD, TelemetryLog, read_log
-from linksim._cli import main
-from linksim._plot import PlotUnavailable
-from linksim._plot_log import plot_log
+from linksim import DEFAULT_WORLD
+from linksim._plotting import PlotUnavailable
+from linksim.cli import main
+from linksim.control import TelemetryLog, plot_log, read_log
 from tcpstream import Feedback
 
 STATE = Feedback(

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from linksim._trajectory import (
+from linksim.arm._trajectory import (
     QUINTIC_PEAK_RATE,
     checkpoint_samples,
     integrate_path,

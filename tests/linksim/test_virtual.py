@@ -2,15 +2,15 @@
 
 Issue 19: eight identical ``linksim demo --virtual --json`` runs gave three
 different results, because trio orders tasks woken together with its own
-unseeded RNG.  ``linksim._virtual.run_virtual`` seeds it.
+unseeded RNG.  ``linksim.link.run_virtual`` seeds it.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from linksim._cli import main
-from linksim._soak import run_soak
+from linksim.bench import run_soak
+from linksim.cli import main
 
 
 def _twice(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[str, str]:

@@ -14,7 +14,7 @@ under 0.90.
 
 from __future__ import annotations
 
-from linksim._bench_goodput import run_transfer
+from linksim.bench import run_goodput_transfer as run_transfer
 
 
 def test_window_31_reaches_90_percent_and_4x_stop_and_wait() -> None:

@@ -8,7 +8,7 @@ import pytest
 import trio
 import trio.testing
 
-from linksim import CallOutcome, ModemConfig, ModemState
+from linksim.link import CallOutcome, ModemConfig, ModemState
 from serialsocket import (
     LineBusy,
     ModemConnection,

@@ -19,7 +19,7 @@ from contextlib import contextmanager
 import pytest
 import trio
 
-from linksim._pair import connected_pair
+from linksim.link._pair import connected_pair
 from serialsocket import (
     EndpointConfig,
     LinkDeadError,

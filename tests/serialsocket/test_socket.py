@@ -9,14 +9,8 @@ import pytest
 import trio
 import trio.testing
 
-from linksim import (
-    DirectionConfig,
-    ImpairedLink,
-    LinkConfig,
-    Outage,
-    endpoint_config_for,
-    serial_socket_pair,
-)
+from linksim import DirectionConfig, LinkConfig, Outage, endpoint_config_for, serial_socket_pair
+from linksim.link import ImpairedLink
 from serialsocket import (
     EndpointConfig,
     LinkDeadError,

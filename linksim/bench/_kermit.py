@@ -1,0 +1,367 @@
+"""``linksim bench kermit``: Kermit file-transfer goodput, ours against C-Kermit's.
+
+Each run sends one file of random binary through ``linksim relay`` (in this
+process) between two ptys, with the same line settings for every pairing:
+
+* ``ours->ckermit``: ``serialsocket kermit send`` to C-Kermit's receiver;
+* ``ckermit->ckermit``: C-Kermit sending to C-Kermit (the reference);
+* optionally ``ckermit->ours`` and the G-Kermit pairings (``--pairs``).
+
+Both sides are told the same window, packet length and block check; streaming
+is off (``set streaming off``: it is not an option on an impaired line and
+ours does not offer it).  The time runs from starting the sender to the
+receiver's exit, so it includes the programs' start-up; the file must be big
+enough to make that small.  The received file is compared byte for byte.
+
+The same machinery runs the interop tests (tests/serialsocket/test_kermit_interop.py):
+:func:`run_transfer` is the one entry point.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+import statistics
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import trio
+
+from linksim.link import DirectionConfig, LinkConfig, run_relay
+from serialsocket import KermitConfig, KermitStatistics, kermit_receive, kermit_send, open_port
+
+__all__ = [
+    "DEFAULT_PAIRS",
+    "PEERS",
+    "TransferResult",
+    "TransferSetup",
+    "available",
+    "bad_pairing",
+    "run_bench_kermit",
+    "run_transfer",
+]
+
+PEERS = ("ours", "ckermit", "gkermit")
+_PROGRAMS = {"ckermit": "kermit", "gkermit": "gkermit"}
+DEFAULT_PAIRS = ("ours->ckermit", "ckermit->ckermit")
+_START_GAP = 0.3
+"""Seconds between starting the receiver and the sender: the receiver must
+have opened its tty first, or the sender's S packet meets a closed pty."""
+
+
+def available(peer: str) -> bool:
+    """True when ``peer`` can run here (ours always; the others need their program)."""
+    return peer == "ours" or shutil.which(_PROGRAMS[peer]) is not None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TransferSetup:
+    """One transfer: who sends, who receives, the line and the protocol settings.
+
+    Attributes:
+        sender, receiver: ``ours``, ``ckermit`` or ``gkermit``.
+        window: window slots both sides are told to use (G-Kermit has none).
+        packet_length: the Kermit receive packet length both sides are told
+            (Kermit's own measure, as C-Kermit's SET RECEIVE PACKET-LENGTH;
+            ours is given the same number as its MARK-through-CHECK length).
+        delay: one-way line delay, s.
+        byte_error_rate: probability a byte is corrupted, each direction.
+        rate: line rate in bit/s, or None for as fast as the ptys go.
+        timeout: fixed timeout for both sides, s (Kermit TIME units: whole seconds).
+        limit: hard limit for the whole transfer, s; stragglers are killed.
+        seed: the relay's random seed.
+        seven_bit: treat the line as 7-bit: ours asks for 8th-bit prefixing,
+            C-Kermit and G-Kermit use parity space (which makes them ask too).
+    """
+
+    sender: str
+    receiver: str
+    window: int = 8
+    packet_length: int = 1000
+    delay: float = 0.0
+    byte_error_rate: float = 0.0
+    rate: float | None = None
+    timeout: int = 5
+    limit: float = 120.0
+    seed: int = 1
+    seven_bit: bool = False
+
+
+def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]) -> list[str]:
+    """C-Kermit, non-interactive: settings, then SEND or RECEIVE, then EXIT with its status."""
+    cmds = [
+        f"set line {line}",
+        "set carrier-watch off",
+        "set flow none",
+        "set parity space" if setup.seven_bit else "set parity none",
+        "set streaming off",
+        "set file type binary",
+        "set transfer mode manual",
+        "set file names literal",
+        "set file collision overwrite",
+        "set attributes on",
+        f"set window {setup.window}",
+        f"set receive packet-length {setup.packet_length}",
+        "set block-check 3",
+        f"set send timeout {setup.timeout} fixed",
+        f"set receive timeout {setup.timeout}",
+        "set retry-limit 20",
+    ]
+    if files:
+        verb = "send" if len(files) == 1 else "msend"
+        cmds.append(f"{verb} " + " ".join(str(f) for f in files))
+    else:
+        cmds.append("receive")
+    cmds.append("exit \\v(status)")
+    return ["kermit", "-Y", "-q", "-B", "-C", ", ".join(cmds)]
+
+
+def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[str]:
+    """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
+    argv = ["gkermit", "-q", "-i", "-P", "-w", "-S", "-b", str(setup.timeout)]
+    argv += ["-e", str(min(max(setup.packet_length, 40), 9000))]
+    if setup.seven_bit:
+        argv += ["-p", "s"]
+    return [*argv, "-s", *map(str, files)] if files else [*argv, "-r"]
+
+
+def _our_config(setup: TransferSetup) -> KermitConfig:
+    return KermitConfig(
+        max_packet_length=setup.packet_length,
+        window=setup.window,
+        timeout=float(setup.timeout),
+        retry_limit=20,
+        seven_bit=setup.seven_bit,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class TransferResult:
+    """What one transfer measured: seconds, and our side's counters if it took part."""
+
+    seconds: float
+    ours: KermitStatistics | None
+
+
+async def _run_peer(
+    peer: str,
+    setup: TransferSetup,
+    line: str,
+    files: Sequence[pathlib.Path],
+    directory: pathlib.Path,
+    log: list[str],
+    ours: list[KermitStatistics],
+) -> None:
+    """Run one side to completion; raises on failure (with the program's output).
+
+    Our side's final counters are appended to ``ours``.
+    """
+    if peer == "ours":
+        port = await open_port(line)
+        async with port:
+            if files:
+                ours.append(await kermit_send(port, files, _our_config(setup)))
+            else:
+                ours.append(await kermit_receive(port, directory, _our_config(setup)))
+        return
+    if peer == "ckermit":
+        argv = _ckermit_argv(setup, line, files)
+        result = await trio.run_process(
+            argv, cwd=directory, capture_stdout=True, capture_stderr=True, check=False
+        )
+    else:
+        fd = os.open(line, os.O_RDWR | os.O_NOCTTY)
+        try:
+            result = await trio.run_process(
+                _gkermit_argv(setup, files),
+                cwd=directory,
+                stdin=fd,
+                stdout=fd,
+                capture_stderr=True,
+                check=False,
+            )
+        finally:
+            os.close(fd)
+    out = (result.stdout or b"") + (result.stderr or b"")
+    log.append(out.decode("utf-8", "replace"))
+    if result.returncode != 0:
+        raise RuntimeError(
+            f"{peer} exited with status {result.returncode}: "
+            f"{out.decode('utf-8', 'replace')[-500:]}"
+        )
+
+
+async def _transfer(
+    setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
+) -> TransferResult:
+    direction = DirectionConfig(
+        rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
+    )
+    config = LinkConfig.symmetric(direction, seed=setup.seed)
+    log: list[str] = []
+    ours: list[KermitStatistics] = []
+    with trio.fail_after(setup.limit):
+        async with trio.open_nursery() as nursery:
+            stop = trio.Event()
+            ready: list[tuple[str, str]] = []
+            got_paths = trio.Event()
+
+            def on_ready(a: str, b: str) -> None:
+                ready.append((a, b))
+                got_paths.set()
+
+            nursery.start_soon(lambda: run_relay(config, stop=stop, on_ready=on_ready))
+            await got_paths.wait()
+            line_a, line_b = ready[0]
+            done = trio.Event()
+            errors: list[BaseException] = []
+
+            async def receiver() -> None:
+                try:
+                    await _run_peer(setup.receiver, setup, line_b, [], out_dir, log, ours)
+                except Exception as exc:
+                    errors.append(exc)
+                done.set()
+
+            nursery.start_soon(receiver)
+            await trio.sleep(_START_GAP)
+            t0 = time.perf_counter()
+            try:
+                await _run_peer(setup.sender, setup, line_a, files, out_dir.parent, log, ours)
+            except Exception as exc:
+                errors.append(exc)
+            with trio.move_on_after(max(4 * setup.timeout, 10)):
+                await done.wait()
+            elapsed = time.perf_counter() - t0
+            stop.set()
+            nursery.cancel_scope.cancel()
+    if not done.is_set():
+        errors.append(RuntimeError(f"the {setup.receiver} receiver did not finish"))
+    if errors:
+        raise RuntimeError(f"{setup.sender}->{setup.receiver} failed: {errors[0]}") from errors[0]
+    return TransferResult(seconds=elapsed, ours=ours[0] if ours else None)
+
+
+def run_transfer(
+    setup: TransferSetup, files: Sequence[pathlib.Path], out_dir: pathlib.Path
+) -> TransferResult:
+    """Send ``files`` (which must not be in ``out_dir``) and check what arrives.
+
+    Returns:
+        The time from starting the sender to the receiver's exit, and our
+        side's counters (None when neither side is ours).
+
+    Raises:
+        RuntimeError: a side failed or timed out (message includes its output).
+        AssertionError: a received file differs from the original.
+    """
+    result = trio.run(_transfer, setup, files, out_dir)
+    for f in files:
+        got = (out_dir / f.name).read_bytes()
+        if got != f.read_bytes():
+            raise AssertionError(
+                f"{f.name}: received {len(got)} bytes that differ from the "
+                f"{f.stat().st_size} sent ({setup.sender}->{setup.receiver})"
+            )
+    return result
+
+
+def _setup(pair: str, base: TransferSetup, seed: int) -> TransferSetup:
+    sender, receiver = pair.split("->")
+    return replace(base, sender=sender, receiver=receiver, seed=seed)
+
+
+def _one(setup: TransferSetup, data: bytes, workdir: pathlib.Path, tag: str) -> TransferResult:
+    src = workdir / f"src-{tag}"
+    out = workdir / f"out-{tag}"
+    src.mkdir()
+    out.mkdir()
+    path = src / "bench.bin"
+    path.write_bytes(data)
+    try:
+        return run_transfer(setup, [path], out)
+    finally:
+        shutil.rmtree(src)
+        shutil.rmtree(out)
+
+
+def _measure(
+    pair: str, base: TransferSetup, runs: int, data: bytes, workdir: pathlib.Path
+) -> dict[str, object]:
+    """Median of ``runs`` transfers, plus the fixed cost of a 1-byte transfer.
+
+    The fixed cost (program start-up, the S/F/A/Z/B exchanges: several round
+    trips) differs between pairings (C-Kermit's sender starts a process, ours
+    runs in this one), so ``net_goodput_Bps`` divides by the time above it.
+    """
+    name = pair.replace("->", "-")
+    fixed = _one(_setup(pair, base, base.seed), b"x", workdir, f"{name}-fixed").seconds
+    times: list[float] = []
+    counters: list[dict[str, int]] = []
+    for run in range(runs):
+        result = _one(_setup(pair, base, base.seed + run), data, workdir, f"{name}-{run}")
+        times.append(result.seconds)
+        if result.ours is not None:
+            st = result.ours
+            counters.append(
+                {
+                    "timeouts": st.timeouts,
+                    "retransmissions": st.retransmissions,
+                    "naks_sent": st.naks_sent,
+                    "naks_received": st.naks_received,
+                    "damaged": st.damaged,
+                    "packets_sent": st.packets_sent,
+                    "window": st.window,
+                    "packet_length": st.packet_length,
+                }
+            )
+    median = statistics.median(times)
+    return {
+        "pair": pair,
+        "runs": runs,
+        "seconds": [round(t, 3) for t in times],
+        "median_seconds": round(median, 3),
+        "goodput_Bps": round(len(data) / median, 1),
+        "fixed_seconds": round(fixed, 3),
+        "net_goodput_Bps": round(len(data) / max(median - fixed, 1e-3), 1),
+        "ours": counters,
+    }
+
+
+def bad_pairing(pairs: Sequence[str]) -> str | None:
+    """Why ``pairs`` cannot run (a malformed pairing, a program not installed), or None."""
+    for pair in pairs:
+        parts = pair.split("->")
+        if len(parts) != 2 or not set(parts) <= set(PEERS):
+            return f"bad pairing {pair!r}: use e.g. ours->ckermit"
+        missing = [p for p in parts if not available(p)]
+        if missing:
+            return f"{missing[0]} is not installed (apt-get install ckermit gkermit)"
+    return None
+
+
+def run_bench_kermit(
+    pairs: Sequence[str], base: TransferSetup, *, size: int, runs: int
+) -> dict[str, object]:
+    """``linksim bench kermit``: each pairing's median of ``runs`` transfers of ``size`` bytes.
+
+    ``base`` holds the line and protocol settings (its sender and receiver are
+    replaced by each pairing's, its seed is the first run's).
+    """
+    data = os.urandom(size)
+    with tempfile.TemporaryDirectory(prefix="bench-kermit-") as tmp:
+        results = [_measure(p, base, runs, data, pathlib.Path(tmp)) for p in pairs]
+    return {
+        "benchmark": "kermit",
+        "bytes": size,
+        "window": base.window,
+        "packet_length": base.packet_length,
+        "delay": base.delay,
+        "byte_error_rate": base.byte_error_rate,
+        "rate": base.rate,
+        "timeout": base.timeout,
+        "results": results,
+    }

@@ -1,0 +1,186 @@
+"""Range-checked ``type=`` converters shared by every ``linksim`` command.
+
+A converter refuses a bad value with argparse's own error, so a typo ends in
+one line naming the option and what it takes, exit status 2, before anything
+is opened, listened on or run::
+
+    linksim arm-server: error: argument --window: must be an integer in 1..31, got '0'
+
+The converters are frozen dataclasses rather than closures so that a test can
+read their bounds and try values outside them for every option of every
+command (tests/test_bad_input_cli.py).  serialsocket keeps the same converters
+in serialsocket/_cliargs.py; this copy exists because linksim does not reach
+into serialsocket's private modules.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import pkgutil
+from dataclasses import dataclass
+
+import serial
+
+from serialsocket import MAX_PACKET_LENGTH, MAX_WINDOW
+
+__all__ = [
+    "BAUD",
+    "BITS_PER_CHAR",
+    "BIT_RATE",
+    "COUNT",
+    "DELAY",
+    "ENDPOINT_LENGTH",
+    "JOBS",
+    "KERMIT_LENGTH",
+    "MAX_DELAY",
+    "MAX_SECONDS",
+    "PROBABILITY",
+    "SECONDS",
+    "SECONDS_OR_ZERO",
+    "SEED",
+    "SERIAL_PORT",
+    "SIZE",
+    "TCP_PORT",
+    "TCP_PORT_OR_ANY",
+    "WINDOW",
+    "FloatRange",
+    "IntRange",
+    "SerialPortName",
+    "read_key",
+]
+
+
+def _number(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+
+
+@dataclass(frozen=True, slots=True)
+class IntRange:
+    """A decimal integer in ``lo..hi`` (``hi`` None: no upper bound)."""
+
+    lo: int
+    hi: int | None = None
+
+    def __call__(self, text: str) -> int:
+        try:
+            value: int | None = int(text, 10)
+        except ValueError:  # not a number, or more digits than int() takes
+            value = None
+        if value is None or value < self.lo or (self.hi is not None and value > self.hi):
+            raise argparse.ArgumentTypeError(
+                f"must be an integer in {self.describe()}, got {text!r}"
+            )
+        return value
+
+    def describe(self) -> str:
+        return f"{self.lo}..{self.hi}" if self.hi is not None else f">= {self.lo}"
+
+
+@dataclass(frozen=True, slots=True)
+class FloatRange:
+    """A finite number in ``[lo, hi]`` (``(lo, hi]`` when ``lo_open``), in ``unit``."""
+
+    lo: float
+    hi: float
+    lo_open: bool = False
+    unit: str = ""
+
+    def __call__(self, text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        above = value > self.lo if self.lo_open else value >= self.lo
+        if not (math.isfinite(value) and above and value <= self.hi):
+            what = f"a number of {self.unit}" if self.unit else "a number"
+            raise argparse.ArgumentTypeError(f"must be {what} in {self.describe()}, got {text!r}")
+        return value
+
+    def describe(self) -> str:
+        return f"{'(' if self.lo_open else '['}{_number(self.lo)}, {_number(self.hi)}]"
+
+
+def _url_schemes() -> list[str]:
+    """The URL schemes pyserial's ``serial_for_url`` can open (its protocol_NAME modules)."""
+    schemes: list[str] = []
+    for package in serial.protocol_handler_packages:
+        spec = importlib.util.find_spec(package)
+        if spec is None or spec.submodule_search_locations is None:
+            continue
+        for info in pkgutil.iter_modules(spec.submodule_search_locations):
+            if info.name.startswith("protocol_"):
+                schemes.append(info.name.removeprefix("protocol_"))
+    return sorted(set(schemes))
+
+
+@dataclass(frozen=True, slots=True)
+class SerialPortName:
+    """A device path, a pty path or a pyserial URL whose scheme pyserial knows.
+
+    Whether the device exists is found out when it is opened (exit status 1
+    or 2 by command, with the errno); this refuses what can never open.
+    """
+
+    def __call__(self, text: str) -> str:
+        if not text or "\0" in text:
+            raise argparse.ArgumentTypeError(
+                f"must be a device path, a pty or a pyserial URL (loop://, "
+                f"socket://HOST:PORT...), got {text!r}"
+            )
+        scheme, sep, _ = text.partition("://")
+        if sep:
+            known = _url_schemes()
+            if scheme.lower() not in known:
+                raise argparse.ArgumentTypeError(
+                    f"unknown URL scheme {scheme!r} in {text!r}: give a device path or one "
+                    f"of pyserial's {', '.join(s + '://' for s in known)}"
+                )
+        return text
+
+
+MAX_SECONDS = 30 * 86400.0
+"""Longest timeout or duration a command takes: 30 days; more is a typo."""
+
+MAX_DELAY = 3600.0
+"""Longest one-way delay: an hour (Mars at conjunction is 22 minutes)."""
+
+_MIN_ENDPOINT_PACKET_LENGTH = 33
+"""serialsocket's EndpointConfig floor: its init packet must fit (tests pin the two equal)."""
+
+BAUD = IntRange(1, 100_000_000)
+"""bit/s of a serial port; far above any UART (FTDI chips top out at 12 Mbaud)."""
+BIT_RATE = FloatRange(0.0, 1e9, lo_open=True, unit="bit/s")
+"""A simulated line's rate: up to 1 Gbit/s."""
+BITS_PER_CHAR = IntRange(1, 64)
+"""As DirectionConfig takes (8N1 = 10)."""
+WINDOW = IntRange(1, MAX_WINDOW)
+ENDPOINT_LENGTH = IntRange(_MIN_ENDPOINT_PACKET_LENGTH, MAX_PACKET_LENGTH)
+KERMIT_LENGTH = IntRange(12, MAX_PACKET_LENGTH)
+"""A Kermit packet, MARK through CHECK (12: the shortest Send-Init)."""
+PROBABILITY = FloatRange(0.0, 1.0)
+DELAY = FloatRange(0.0, MAX_DELAY, unit="seconds")
+SECONDS = FloatRange(0.0, MAX_SECONDS, lo_open=True, unit="seconds")
+SECONDS_OR_ZERO = FloatRange(0.0, MAX_SECONDS, unit="seconds")
+SEED = IntRange(0, 2**64 - 1)
+"""Seeds are >= 0 (LinkConfig); 64 bits is plenty."""
+TCP_PORT = IntRange(1, 65535)
+TCP_PORT_OR_ANY = IntRange(0, 65535)
+"""A port to listen on; 0 lets the system pick a free one."""
+SIZE = IntRange(1, 1 << 34)
+"""Bytes of a benchmark payload: up to 16 GiB."""
+COUNT = IntRange(1, 1_000_000)
+"""Runs, repeats, round trips, sessions."""
+JOBS = IntRange(1, 256)
+SERIAL_PORT = SerialPortName()
+
+
+def read_key(path: str) -> bytes:
+    """A key file holds the pre-shared key as hex digits (whitespace ignored)."""
+    with open(path, encoding="ascii") as f:
+        text = "".join(f.read().split())
+    try:
+        return bytes.fromhex(text)
+    except ValueError:
+        raise ValueError(f"{path}: the key file must hold the key as hex digits") from None

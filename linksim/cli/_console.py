@@ -1,0 +1,173 @@
+"""``linksim console`` and ``linksim plot``: argument parsing and exit status.
+
+Exit status of ``console``: 0 when every command completed (an observer:
+when the watched session ended or the timeout passed), 1 when the run
+failed or ``--require-preview`` refused the plan, 2 for bad options.
+``plot``: 0 when the PNG was written, 1 when it could not be (no
+matplotlib, an empty or malformed log).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+
+import serialsocket
+from linksim._errors import ConfigError
+from linksim._plotting import PlotUnavailable
+from linksim.arm import DEFAULT_WORLD, WorldConfig, rock_task
+from linksim.control import plot_log, preview
+from linksim.demo import ConsoleOptions, DemoOptions, run_console
+from linksim.link import DirectionConfig, LinkConfig
+
+from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, read_key
+from ._link import add_link_arguments, config_from_args
+
+__all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
+
+
+_SPEEDUP = FloatRange(0.0, 1e6, unit="times real time")
+"""--speedup: 0 runs as fast as possible; a million times real time is a typo's neighbour."""
+
+
+def add_console_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim console`` (those of ``linksim control``, plus the console's)."""
+    add_link_arguments(ap)
+    ap.add_argument("--transport", choices=["serial", "tcp"], default="serial")
+    ap.add_argument(
+        "--virtual",
+        "--demo",
+        action="store_true",
+        help="arm server, impaired link (--preset, default noisy-moon) and console in one "
+        "process on a virtual clock: instant, deterministic",
+    )
+    ap.add_argument(
+        "--speedup",
+        type=_SPEEDUP,
+        default=0.0,
+        help="with --virtual: run the virtual clock this many times faster than real time "
+        "to watch the run (default 0: as fast as possible)",
+    )
+    ap.add_argument("--observer", action="store_true", help="watch an arm (tcp); send nothing")
+    ap.add_argument("--task", choices=["rock"], default="rock", help="the command list to drive")
+    ap.add_argument(
+        "--require-preview",
+        action="store_true",
+        help="send nothing if the local model predicts a refusal",
+    )
+    ap.add_argument(
+        "--preview-only",
+        action="store_true",
+        help="print what the local model predicts for the task and exit (connects to nothing)",
+    )
+    ap.add_argument("--log", metavar="FILE", help="write every state and command event (JSONL)")
+    ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument("--port", type=SERIAL_PORT, help="serial device or pty path (serial transport)")
+    ap.add_argument("--baud", type=BAUD, default=9600, help="line rate, bit/s (default 9600)")
+    ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
+    ap.add_argument("--host", default="127.0.0.1", help="arm server address (tcp)")
+    ap.add_argument("--tcp-port", type=TCP_PORT, default=7010, help="arm server port (tcp)")
+    ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
+    ap.add_argument("--plain", action="store_true", help="line output even on a terminal")
+    ap.add_argument("--json", action="store_true", help="print a final summary as JSON")
+    ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
+
+
+def console_main(args: argparse.Namespace) -> int:
+    """``linksim console``."""
+    try:
+        world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
+        key = read_key(args.key_file) if args.key_file else None
+        if args.speedup < 0 or (args.speedup and not args.virtual):
+            raise ConfigError("--speedup is a positive factor for --virtual runs")
+        if args.observer and (args.virtual or args.require_preview):
+            raise ConfigError(
+                "--observer watches a running arm: not with --virtual/--require-preview"
+            )
+        if args.virtual:
+            if args.config is None and args.preset is None:
+                args.preset = "noisy-moon"
+            link = config_from_args(args)
+            preset = args.preset if args.config is None else str(args.config)
+        else:
+            if args.transport == "serial" and not args.port and not args.preview_only:
+                raise ConfigError("--port PATH is needed for the serial transport")
+            rate = args.baud if args.transport == "serial" else None
+            link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay or 0.0))
+            preset = None
+        demo = DemoOptions(
+            link=link,
+            preset=preset,
+            transport=args.transport,
+            virtual=args.virtual,
+            world=world,
+            key=key,
+            live=False if args.plain else None,
+            timeout=args.timeout,
+        )
+        options = ConsoleOptions(
+            demo,
+            observer=args.observer,
+            require_preview=args.require_preview,
+            log=args.log,
+            host=args.host,
+            tcp_port=args.tcp_port,
+            port=args.port,
+            baud=args.baud,
+            dial=args.dial,
+            rate=args.speedup,
+        )
+    except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
+        print(f"linksim console: {exc}", file=sys.stderr)
+        return 2
+    if args.preview_only:
+        return _preview_only(world, as_json=args.json)
+    try:
+        result = run_console(options)
+    except KeyboardInterrupt:
+        print("linksim console: interrupted", file=sys.stderr)
+        return 130  # as a shell reports SIGINT
+    if args.json:
+        json.dump(result.as_dict(), sys.stdout)
+        sys.stdout.write("\n")
+    if result.error:
+        print(f"linksim console: {result.error}", file=sys.stderr)
+    return 0 if result.ok else 1
+
+
+def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
+    """``--preview-only``: the rock task on the local model; 0 when nothing is refused."""
+    report = preview(rock_task(world).commands, world)
+    if as_json:
+        json.dump(report.as_dict(), sys.stdout)
+        sys.stdout.write("\n")
+    else:
+        for o in report.outcomes:
+            verdict = "ok" if o.ok else f"{o.reason.name}: {o.message}"
+            # Results to stdout (`--preview-only > plan.txt`), diagnostics to stderr.
+            print(f"#{o.index:<2} {o.start:6.2f} s +{o.duration:5.2f} s  {o.label}: {verdict}")
+        p = ", ".join(f"{x:+.3f}" for x in report.final.p)
+        print(
+            f"{'OK' if report.ok else 'REFUSED'}: {report.duration:.2f} s of motion, "
+            f"ends with the hand at ({p}) m"
+        )
+    return 0 if report.ok else 1
+
+
+def add_plot_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim plot``."""
+    ap.add_argument("log", metavar="FILE", help="a telemetry log written by linksim console --log")
+    ap.add_argument("--out", required=True, metavar="PNG", help="the image to write")
+
+
+def plot_main(args: argparse.Namespace) -> int:
+    """``linksim plot FILE --out PNG``."""
+    try:
+        path = plot_log(args.log, args.out)
+    except (PlotUnavailable, ValueError, OSError) as exc:
+        print(f"linksim plot: {exc}", file=sys.stderr)
+        return 1
+    print(path)  # the result: where the plot is
+    return 0

@@ -1,0 +1,41 @@
+"""The control station: task runs, the operator console, prediction, preview, telemetry.
+
+* :class:`TaskRun`: a task script run pipelined through an arm client, with a
+  record of every command (:class:`CommandRecord`, :class:`CommandState`);
+  :class:`Progress` shows it on stderr.
+* :func:`preview` plays commands on a local copy of the arm
+  (:class:`PreviewReport`); :class:`Predictor` keeps the predicted state
+  ahead of the confirmed one and records :class:`Divergence`;
+  :class:`ConsoleSession` / :class:`ConsoleSnapshot` draw it.
+* :class:`TelemetryLog` / :func:`read_log` write and read the JSON-lines log;
+  :func:`plot_log` plots it (``linksim plot``).
+"""
+
+from __future__ import annotations
+
+from ._console import ConsoleSession, ConsoleSnapshot
+from ._control import CommandRecord, CommandState, TaskRun, feedback_record
+from ._plot import plot_log
+from ._predict import Divergence, Predictor
+from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
+from ._progress import Progress
+from ._telemetry_log import TelemetryLog, read_log
+
+__all__ = [
+    "CommandRecord",
+    "CommandState",
+    "ConsoleSession",
+    "ConsoleSnapshot",
+    "Divergence",
+    "ModelState",
+    "PredictedOutcome",
+    "Predictor",
+    "PreviewReport",
+    "Progress",
+    "TaskRun",
+    "TelemetryLog",
+    "feedback_record",
+    "plot_log",
+    "preview",
+    "read_log",
+]
