@@ -83,6 +83,8 @@ class _Driver:
         self.owns_port = owns_port
         self.generation = 0
         self.broken: LinkBroken | None = None
+        self.ended_by_us: str | None = None
+        """Why this side aborted the current connection (our own E packet), if it did."""
         self._changed = trio.Event()
         self._cancel = trio.CancelScope()
         self._stopped = trio.Event()
@@ -119,12 +121,19 @@ class _Driver:
     def after_input(self) -> None:
         """Collect endpoint events that end the connection, then wake waiters."""
         for event in self.ep.events():
-            if isinstance(event, ConnectionAborted) and event.by_peer and self.broken is None:
+            if isinstance(event, ConnectionAborted) and not event.by_peer:
+                self.ended_by_us = self.ended_by_us or event.reason
+            elif isinstance(event, ConnectionAborted) and self.broken is None:
                 self.broken = PeerAborted(event.reason)
             elif isinstance(event, LinkDead) and self.broken is None:
                 self.broken = LinkDeadError(event)
             log.debug("endpoint event: %s", event)
         self.notify()
+
+    @property
+    def stopped(self) -> bool:
+        """The tasks have ended (:meth:`stop`, or their nursery was cancelled)."""
+        return self._stopped.is_set()
 
     def fail(self, cause: LinkBroken) -> None:
         if self.broken is None:

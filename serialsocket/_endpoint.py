@@ -105,8 +105,10 @@ class EndpointStatistics:
     wire_bytes_received: int
     bytes_queued: int
     bytes_acknowledged: int
+    bytes_in_flight: int
     bytes_delivered: int
     bytes_readable: int
+    eof_received: bool
     retransmissions: int
     timeouts: int
     fast_retransmits: int
@@ -154,6 +156,9 @@ class Endpoint:
     _connect_deadline: float
     _linger_until: float
     _dead_after: float
+    _close_deadline: float
+    _close_patience: float
+    _close_mark: tuple[int, int]
     _peer_data_seen: bool
     _abort_reason: str | None
     _error_sent_at: float
@@ -262,7 +267,7 @@ class Endpoint:
             raise LocalProtocolError(f"cannot send EOF: the connection is {self._state.value}")
         self._sender.eof_requested = True
 
-    def close(self, now: float) -> None:
+    def close(self, now: float, *, patience: float | None = None) -> None:
         """Graceful close of both directions (TCP's close()).
 
         Our EOF follows everything already queued; the close finishes
@@ -271,9 +276,21 @@ class Endpoint:
         after this point is refused: the connection is aborted with an E
         packet, as TCP answers with RST, so a peer that keeps writing learns
         that nobody reads.  Use :meth:`send_eof` to stop sending but keep
-        receiving."""
+        receiving.
+
+        The close takes as long as it makes progress: however much data is
+        still queued, it never ends because a fixed time has passed.  It is
+        given up (ConnectionAborted, an E packet to the peer) only after
+        ``patience`` seconds (default ``dead_after``) in which nothing moved:
+        no packet of ours newly acknowledged and nothing new in order from the
+        peer.  Each such step re-arms the deadline (see :meth:`get_timer`).
+        A silent link is judged dead after ``dead_after`` as always."""
         if self._state in TERMINAL or self._state is State.LINGER:
             return
+        if self._state is State.ESTABLISHED and self._close_deadline == math.inf:
+            self._close_patience = self._dead_after if patience is None else patience
+            self._close_mark = self._progress_mark()
+            self._close_deadline = now + self._close_patience
         self._sender.eof_requested = True
         self._receiver.discard = True
         self._receiver.discarded_total += len(self._receiver.readable)
@@ -328,6 +345,11 @@ class Endpoint:
         return len(self._receiver.readable)
 
     @property
+    def closing(self) -> bool:
+        """:meth:`close` was called and the close has not finished yet."""
+        return self._state is State.ESTABLISHED and self._close_deadline < math.inf
+
+    @property
     def data_settled(self) -> bool:
         """Every byte we were given is acknowledged and the peer's EOF has arrived.
 
@@ -369,6 +391,7 @@ class Endpoint:
                 except RemoteProtocolError as exc:
                     log.warning("protocol error from peer: %s", exc)
                     self._finish_abort(exc.error_hint, by_peer=False, send=True)
+                self._note_close_progress(now)
             elif event.reason in _DAMAGE and self._state is State.ESTABLISHED:
                 nak = self._receiver.gap_to_nak(now, self._rtt.timeout())
                 if nak is not None:
@@ -397,6 +420,8 @@ class Endpoint:
         if st is not State.ESTABLISHED:
             return None
         times = [self._last_heard + self._dead_after, self._next_probe_time()]
+        if self._close_deadline < math.inf:
+            times.append(self._close_deadline)
         deadline = self._sender.next_deadline()
         if deadline is not None:
             times.append(deadline)
@@ -446,6 +471,12 @@ class Endpoint:
         if now >= self._last_heard + self._dead_after:
             self._declare_dead(silence)
             return
+        if now >= self._close_deadline:
+            # Checked after the silence verdict: a dead link is reported as dead.
+            self._finish_abort(
+                f"close made no progress for {self._close_patience:.1f} s", by_peer=False, send=True
+            )
+            return
         expired = self._sender.expired(now)
         if expired:
             self._counters["timeouts"] += 1
@@ -493,8 +524,10 @@ class Endpoint:
             wire_bytes_received=c["wire_bytes_received"],
             bytes_queued=len(s.queue),
             bytes_acknowledged=s.bytes_acked,
+            bytes_in_flight=s.bytes_in_flight,
             bytes_delivered=r.delivered_total,
             bytes_readable=len(r.readable),
+            eof_received=r.eof,
             retransmissions=c["retransmissions"],
             timeouts=c["timeouts"],
             fast_retransmits=c["fast_retransmits"],
@@ -543,6 +576,9 @@ class Endpoint:
         self._connect_deadline = math.inf
         self._linger_until = math.inf
         self._dead_after = cfg.derived_dead_after()
+        self._close_deadline = math.inf
+        self._close_patience = self._dead_after
+        self._close_mark = (0, 0)
         self._peer_data_seen = False
         self._abort_reason = None
         self._error_sent_at = -math.inf
@@ -750,6 +786,20 @@ class Endpoint:
         if arrival.eof:
             self._events.append(EndOfStream())
         self._check_closed(now)
+
+    def _progress_mark(self) -> tuple[int, int]:
+        """What a close's progress is measured by: our packets acknowledged
+        (selectively too, EOF included) and the peer's packets received in order."""
+        return self._sender.packets_acked, self._receiver.expected
+
+    def _note_close_progress(self, now: float) -> None:
+        """Re-arm the close deadline if this packet moved anything."""
+        if self._close_deadline == math.inf or self._state is not State.ESTABLISHED:
+            return
+        mark = self._progress_mark()
+        if mark != self._close_mark:
+            self._close_mark = mark
+            self._close_deadline = now + self._close_patience
 
     def _check_closed(self, now: float) -> None:
         if self._state is State.ESTABLISHED and self._sender.eof_acked and self._receiver.eof:

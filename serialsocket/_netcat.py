@@ -11,8 +11,11 @@ stdin and stdout are read and written in worker threads, not through
 non-blocking mode (see trio's FdStream warning), and a slow stdout must not
 stall the event loop that answers the peer's packets.
 
-Exit status: 0 when both directions finished cleanly; 1 when the link or the
-modem failed (the message on stderr says why); 2 for bad options.
+Exit status: 0 means exactly that every byte read from stdin was
+acknowledged by the peer and every byte the peer sent was written to stdout
+(its EOF seen).  Any other ending is 1 (the link, the close or the modem
+failed: stderr says what happened, and how many bytes were acknowledged, in
+flight and never sent each way), 2 for bad options, 130 for Ctrl-C.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import argparse
 import logging
 import os
 import sys
+from dataclasses import dataclass
 
 import trio
 
@@ -96,15 +100,43 @@ def _write_all(data: bytes) -> None:
         view = view[os.write(1, view) :]
 
 
-async def _pump(sock: SerialSocket) -> None:
+@dataclass
+class _Tally:
+    """What this run moved, for the final report (whatever ended it)."""
+
+    sock: SerialSocket | None = None
+    stdin_bytes: int = 0
+    stdout_bytes: int = 0
+    peer_eof: bool = False
+
+    def report(self) -> str:
+        """How far each direction got, in bytes."""
+        if self.sock is None:
+            return "not connected: nothing was sent or received"
+        st = self.sock.statistics().link
+        acked, in_flight = st.bytes_acknowledged, st.bytes_in_flight
+        # Bytes read from stdin but never handed to the socket count as never sent.
+        unsent = max(self.stdin_bytes - acked - in_flight, 0)
+        eof = "seen" if self.peer_eof else "not seen"
+        return (
+            f"stdin: {self.stdin_bytes} bytes read, {acked} acknowledged by the peer, "
+            f"{in_flight} in flight (may or may not have arrived), {unsent} never sent; "
+            f"stdout: {self.stdout_bytes} bytes written, the peer's EOF {eof}"
+        )
+
+
+async def _pump(sock: SerialSocket, tally: _Tally) -> None:
     async def upstream() -> None:
         while data := await _read_stdin():
+            tally.stdin_bytes += len(data)
             await sock.send_all(data)
         await sock.send_eof()
 
     async def downstream() -> None:
         while data := await sock.receive_some(_CHUNK):
             await trio.to_thread.run_sync(_write_all, data)
+            tally.stdout_bytes += len(data)
+        tally.peer_eof = True
 
     async with trio.open_nursery() as nursery:
         nursery.start_soon(upstream)
@@ -127,7 +159,7 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
     )
 
 
-async def _run(args: argparse.Namespace, listening: bool) -> None:
+async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None:
     _config(args, None)  # validate the options before touching the port
     port = await open_port(args.port, args.baud or _DEFAULT_BAUD)
     stream: trio.abc.Stream = port
@@ -150,19 +182,22 @@ async def _run(args: argparse.Namespace, listening: bool) -> None:
             sock = await accept(stream, cfg, nursery=nursery)
         else:
             sock = await connect(stream, cfg, nursery=nursery)
+        tally.sock = sock
         try:
-            await _pump(sock)
+            await _pump(sock, tally)
         finally:
             await sock.aclose()
         # Exit 0 means delivered: every byte of stdin acknowledged by the peer
-        # and the peer's EOF received.  A close that did not complete is not
-        # that, however quietly it ended.
+        # and the peer's EOF received (so all it sent is on our stdout).  Our
+        # own close ending is not that: the close says whether it was
+        # (close_error), and anything short of it is a failure, however
+        # quietly the close ended.
         if sock.close_error is not None:
             raise IncompleteClose(sock.close_error)
 
 
 class IncompleteClose(Exception):
-    """The transfer ran but the close did not complete: not everything is known delivered."""
+    """The transfer ran but did not end delivered both ways (see ``close_error``)."""
 
 
 def _first_leaf(group: BaseExceptionGroup[BaseException]) -> BaseException:
@@ -183,25 +218,35 @@ def netcat_main(args: argparse.Namespace, *, listening: bool) -> int:
         trace.setLevel(logging.DEBUG)
         trace.propagate = False
     name = "listen" if listening else "connect"
+    tally = _Tally()
     try:
         try:
-            trio.run(_run, args, listening)
+            trio.run(_run, args, listening, tally)
         except BaseExceptionGroup as group:
             raise _first_leaf(group) from None
     except LocalProtocolError as exc:
         print(f"serialsocket {name}: {exc}", file=sys.stderr)
         return 2
     except (DialError, OSError, ConnectionRefusedError) as exc:
-        print(f"serialsocket {name}: {exc}", file=sys.stderr)
+        _fail(name, str(exc), tally)
         return 1
     except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
         cause = exc.__cause__
         reason = cause if isinstance(cause, LinkBroken) else exc
-        print(f"serialsocket {name}: the link failed: {reason}", file=sys.stderr)
+        _fail(name, f"the link failed: {reason}", tally)
         return 1
     except IncompleteClose as exc:
-        print(f"serialsocket {name}: {exc}", file=sys.stderr)
+        _fail(name, str(exc), tally)
         return 1
     except KeyboardInterrupt:
+        if tally.sock is not None:
+            _fail(name, "interrupted", tally)
         return 130
     return 0
+
+
+def _fail(name: str, what: str, tally: _Tally) -> None:
+    """What ended the run and, once connected, how far each direction got."""
+    print(f"serialsocket {name}: {what}", file=sys.stderr)
+    if tally.sock is not None:
+        print(f"serialsocket {name}: {tally.report()}", file=sys.stderr)

@@ -97,9 +97,11 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         self.close_timeout = close_timeout
         """Seconds a close may go without progress before it is given up."""
         self.close_error: str | None = None
-        """After :meth:`aclose`: None if the close completed (every byte we sent
-        acknowledged and the peer's EOF received), else what went wrong and how
-        many bytes were acknowledged, in flight and never sent."""
+        """After :meth:`aclose`: None if the connection ended delivered (every
+        byte we were given acknowledged by the peer and the peer's EOF
+        received), else what happened and how many bytes were acknowledged,
+        in flight and never sent."""
+        self._final: str | None = None  # how the connection ended, if it ended before aclose
 
     @property
     def endpoint(self) -> Endpoint:
@@ -237,40 +239,48 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         """Close gracefully: all our data acknowledged, both EOFs exchanged.
 
         Waits as long as the close makes progress -- our data being
-        acknowledged, the peer's still arriving -- and gives up only after
-        ``close_timeout`` without any (or when the link is judged dead): a
-        long backlog on a slow line drains, however long it takes.  If the
-        close does not complete -- no progress, the link died, the peer
-        aborted -- the connection is aborted with an E packet and
-        :attr:`close_error` says so, with what was acknowledged, in flight and
-        never sent (``aclose`` itself does not raise for it, as trio's streams
-        do not; a program whose exit status means "delivered" checks it, as the
-        netcat does).  If cancelled, the connection is aborted.  Idempotent.
+        acknowledged, the peer's EOF arriving -- however long a backlog on a
+        slow line takes to drain.  The endpoint gives the close up (and tells
+        the peer, with an E packet) only after ``close_timeout`` seconds in
+        which nothing moved, or when the link is judged dead by silence:
+        there is no fixed deadline counted from the call.
+
+        Afterwards :attr:`close_error` is None exactly when every byte we were
+        given was acknowledged by the peer and the peer's EOF arrived; else it
+        says what happened and how many bytes were acknowledged, in flight
+        and never sent.  ``aclose`` itself does not raise for it, as trio's
+        streams do not; a program whose exit status means "delivered" checks
+        it, as the netcat does.  If cancelled, the connection is aborted (and
+        ``Cancelled`` propagates).  Idempotent.
         """
         if self._closed:
             await trio.lowlevel.checkpoint()
             return
         self._closed = True
         d = self._d
+        if self._generation != d.generation:
+            # The listener already reset the endpoint for a newer connection:
+            # it is not ours to close.  How ours ended was recorded then.
+            await trio.lowlevel.checkpoint()
+            self.close_error = self._final
+            return
         d.notify()  # wake our own blocked receive/send: they now raise Closed
-        failure: str | None = None
-        closing = False  # we began a graceful close (its failure is news to the caller)
         try:
             await trio.lowlevel.checkpoint()
             if d.ep.state is State.ESTABLISHED and d.broken is None:
-                closing = True
-                d.ep.close(d.now())
+                d.ep.close(d.now(), patience=self.close_timeout)
                 d.notify()
-                await self._drain_close()
-            if d.ep.state is State.ESTABLISHED and d.broken is None:
-                failure = (
-                    f"close made no progress for {self.close_timeout:.1f} s: "
-                    f"{_counts(d.ep.statistics())}"
-                )
-                d.ep.abort("close timed out: no progress", d.now())
+                # Only the endpoint ends this wait: the close completes, the
+                # peer aborts, the link is judged dead, or the close makes no
+                # progress for close_timeout (its deadline re-arms on every
+                # acknowledgement, inside the endpoint's timers).
+                while d.ep.state is State.ESTABLISHED and d.broken is None and not d.stopped:
+                    await d.changed()
         except trio.Cancelled:
             if d.ep.state not in TERMINAL:
                 d.ep.abort("connection closed by the application", d.now())
+                d.after_input()
+            self.close_error = _ending(d, "the close was cancelled")
             raise
         finally:
             await d.flush()
@@ -278,36 +288,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 await d.stop()
             else:
                 d.notify()
-        # A link that was already broken was reported by the call that found
-        # it; a graceful close that did not complete is recorded here (trio's
-        # contract: aclose closes, it does not report -- see close_error).
-        graceful = d.ep.state in (State.CLOSED, State.LINGER) or d.ep.data_settled
-        if failure is not None:
-            self.close_error = f"the close did not complete: {failure}"
-        elif closing and not graceful and d.broken is not None:
-            self.close_error = f"the close did not complete: {d.broken}"
-
-    async def _drain_close(self) -> None:
-        """Wait for the close to finish, re-arming the deadline on every bit of progress."""
-        d = self._d
-
-        def progress() -> tuple[int, int]:
-            # Our own data being acknowledged: after close() we read nothing
-            # more, so the peer's packets are not progress of this close.
-            st = d.ep.statistics()
-            return st.bytes_acknowledged, st.in_flight
-
-        mark = progress()
-        deadline = trio.current_time() + self.close_timeout
-        while d.ep.state is State.ESTABLISHED and d.broken is None:
-            with trio.move_on_at(deadline):
-                await d.changed()
-            now_mark = progress()
-            if now_mark != mark:
-                mark = now_mark
-                deadline = trio.current_time() + self.close_timeout
-            elif trio.current_time() >= deadline:
-                return
+        self.close_error = _ending(d)
 
 
 class SerialListener(trio.abc.Listener[SerialSocket]):
@@ -349,10 +330,15 @@ class SerialListener(trio.abc.Listener[SerialSocket]):
                 self._session = SerialSocket(d, close_timeout=self._close_timeout)
                 return self._session
             if state in TERMINAL:
+                if self._session is not None and self._session._generation == d.generation:
+                    # Record how it ended before the endpoint forgets it: a
+                    # later aclose on that session reports it.
+                    self._session._final = _ending(d)
                 d.ep.reset()
                 d.ep.listen()
                 d.generation += 1
                 d.broken = None
+                d.ended_by_us = None
                 d.notify()
                 continue
             await d.changed()
@@ -363,7 +349,11 @@ class SerialListener(trio.abc.Listener[SerialSocket]):
             await trio.lowlevel.checkpoint()
             return
         self._closed = True
-        if self._d.ep.state not in TERMINAL and self._d.ep.state is not State.IDLE:
+        # A live session is aborted (close it first to close it gracefully);
+        # one that completed its close (LINGER) is simply left: an E then
+        # would tell a peer still waiting for our last ACK that it failed.
+        state = self._d.ep.state
+        if state not in TERMINAL and state not in (State.IDLE, State.LINGER):
             self._d.ep.abort("listener closed", self._d.now())
             await self._d.flush()
         self._d.owns_port = True
@@ -371,7 +361,7 @@ class SerialListener(trio.abc.Listener[SerialSocket]):
 
 
 def _close_timeout(config: EndpointConfig) -> float:
-    """How long aclose waits for the peer: a dead-link interval (derived from the physics)."""
+    """How long a close may go without progress: a dead-link interval (from the physics)."""
     return config.derived_dead_after()
 
 
@@ -515,8 +505,34 @@ async def serve(
                 await sock.aclose()
 
 
-def _counts(st: EndpointStatistics) -> str:
+def _ending(d: _Driver, what: str | None = None) -> str | None:
+    """None if the connection on ``d`` ended delivered, else what happened, with the counts.
+
+    Delivered: every byte we were given is acknowledged and the peer's EOF
+    arrived (the closing handshake done, or only its last ACK missing: that
+    is no data lost).  Anything else -- a close given up, an abort either
+    way, a dead link, a failed line -- is reported, whichever side noticed.
+    """
+    ep = d.ep
+    if ep.state in (State.CLOSED, State.LINGER) or ep.data_settled:
+        return None
+    if what is None:
+        if d.broken is not None:
+            what = str(d.broken)
+        elif d.ended_by_us is not None:
+            what = f"this side aborted the connection: {d.ended_by_us}"
+        elif d.stopped:
+            what = "the serial socket stopped before the close finished"
+        else:
+            what = f"the connection ended ({ep.state.value})"
+    return f"the connection did not close cleanly: {what}; {counts(ep.statistics())}"
+
+
+def counts(st: EndpointStatistics) -> str:
+    """What was delivered each way, in a user's words (for failure reports)."""
+    peer_eof = "its EOF received" if st.eof_received else "its EOF not received"
     return (
-        f"{st.bytes_acknowledged} bytes acknowledged, {st.in_flight} packets in flight, "
-        f"{st.bytes_queued} bytes never sent"
+        f"sent: {st.bytes_acknowledged} bytes acknowledged, {st.bytes_in_flight} in flight "
+        f"(may or may not have arrived), {st.bytes_queued} never sent; "
+        f"received: {st.bytes_delivered} bytes from the peer, {peer_eof}"
     )
