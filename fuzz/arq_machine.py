@@ -38,11 +38,13 @@ heals the line (chunks already on it stay, possibly damaged; nothing new is
 impaired), half-closes each side once everything it sent is acknowledged, and
 runs the simulation until both endpoints are CLOSED, reading everything.
 
-Three known endpoint bugs are stepped around, each pinned by a strict xfail test
-in tests/serialsocket/test_arq_stateful.py so the fuzzer keeps hunting new ones:
-``SMALLEST_LENGTH`` (the init packet does not fit small packet lengths),
-``LINGER`` (the derived linger is too short) and ``EOF_AFTER_ACKS`` (a selective
-ACK of the EOF closes with data outstanding).
+Three endpoint bugs this machine found are fixed, and each has an ordinary
+regression test in tests/serialsocket/test_arq_stateful.py: the init packet did
+not fit the smallest packet lengths (``EndpointConfig`` now refuses lengths it
+cannot connect with), the derived linger ended before the peer's backed-off EOF
+retransmission, and a selective ACK of the EOF with earlier data lost closed the
+connection with that data never resent.  Nothing is stepped around: the machine
+draws the smallest accepted length and half-closes at any moment.
 
 Properties
 ----------
@@ -113,11 +115,11 @@ LIVENESS_TIMEOUT = 1e6
 any simulated time an example reaches, so impairments never end a connection."""
 
 LINGER = LIVENESS_TIMEOUT / 10
-"""Explicit ``linger`` for both endpoints (seconds).  The derived default, twice
-the lingering side's own timeout, can end before the peer's backed-off
-retransmission of its EOF arrives, and the peer then never closes (a bug pinned
-by ``test_linger_outlasts_peer_eof_retransmission``).  A linger longer than any
-backoff ceiling keeps that known failure from masking everything else."""
+"""Explicit ``linger`` for both endpoints (seconds).  The derived default is
+``dead_after`` (10**6 s here), longer than ``FINISH_MAX_SECONDS``, so a side
+lingering to the end would fail the finish bound; a tenth of it still outlasts
+any backoff ceiling of the peer's EOF retransmission (that the derived default
+does too on real lines is ``test_linger_outlasts_peer_eof_retransmission``)."""
 
 IMPAIRMENT_HORIZON = LIVENESS_TIMEOUT / 10
 """Before healing, time never passes this instant.  Simulated idleness is free:
@@ -143,19 +145,9 @@ Draining a line full of duplicates and noise takes far fewer; a connection
 that retransmits into a void forever hits this long before the time limit."""
 
 SMALLEST_LENGTH = 33
-"""The smallest ``max_packet_length`` drawn.  EndpointConfig accepts 12, but the
-init packet is 33 characters and the parser rejects it as too long below
-that, so such an endpoint can never connect (a bug pinned by
-``test_smallest_packet_length_can_connect`` in tests/serialsocket/test_arq_stateful.py).
-Drawing shorter lengths would only rediscover it."""
-
-EOF_AFTER_ACKS = False
-"""Half-close only once everything sent so far is acknowledged.  Otherwise a
-selective ACK of the EOF, with an earlier data packet lost, makes the sender
-report ConnectionClosed and stop without ever resending that data (a bug pinned
-by ``test_eof_acked_before_data_does_not_close``).  With nothing else
-outstanding, an ACK of the EOF is necessarily cumulative, so the bug cannot
-fire; set to False to hunt it."""
+"""The smallest ``max_packet_length`` drawn: the smallest ``EndpointConfig``
+accepts, because the 33-character init packet must fit (shorter lengths are
+refused with LocalProtocolError; ``test_smallest_packet_length_can_connect``)."""
 
 TIMER_SPIN_LIMIT = 64
 """Consecutive ``handle_timer`` calls at one instant before we call it a spin:
@@ -397,7 +389,9 @@ class ARQMachine(RuleBasedStateMachine):
         return [s for s in SIDES if self._can_send(s)]
 
     def _closers(self) -> list[str]:
-        return [s for s in self._senders() if self.ep[s].all_acknowledged or not EOF_AFTER_ACKS]
+        # Any moment, data outstanding or not: an EOF selectively acknowledged
+        # before lost data must not close the connection.
+        return self._senders()
 
     def _busy_lines(self) -> list[str]:
         return [d for d in DIRECTIONS if self.lines[d].chunks]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
+import pkgutil
 from dataclasses import dataclass
 
 import serial
@@ -99,8 +100,6 @@ class FloatRange:
 
 def _url_schemes() -> list[str]:
     """The URL schemes pyserial's ``serial_for_url`` can open (its protocol_NAME modules)."""
-    import pkgutil
-
     schemes: list[str] = []
     for package in serial.protocol_handler_packages:
         spec = importlib.util.find_spec(package)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import math
+import multiprocessing
 import os
 import random
 import struct
@@ -519,8 +520,6 @@ def run_grid(
         results: Iterable[tuple[int, dict[str, Any]]] = map(_run_item, items)
         pool = None
     else:
-        import multiprocessing
-
         # fork would copy the parent's state cheaply but is unsafe once threads
         # exist; spawn/forkserver re-import the module, which is all we need.
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else None

@@ -81,7 +81,8 @@ def _transfer_and_close(
     got = {"a": bytearray(), "b": bytearray()}
     for side, ep in (("a", a), ("b", b)):
         assert ep.send(data[side], 0.0) == len(data[side])
-    # Half-close once all data is acknowledged: see EOF_AFTER_ACKS in fuzz/arq_machine.py.
+    # Half-close once all data is acknowledged (this scenario measures delivery, not the
+    # early-EOF race: test_eof_acked_before_data_does_not_close has that).
     link.run_until(lambda: a.all_acknowledged and b.all_acknowledged, limit=2 * LINGER)
     a.send_eof(link.now)
     b.send_eof(link.now)
