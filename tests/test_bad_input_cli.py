@@ -524,6 +524,20 @@ RUNTIME_CASES = [
         False,
     ),
     (["linksim", "demo", "--virtual", "--world", "/nonexistent.toml"], 2, "nonexistent", False),
+    # Options that would be ignored are refused with the reason.
+    (["linksim", "demo", "--virtual", "--dial", "5551234"], 2, "cannot run with --virtual", False),
+    (["linksim", "demo", "--transport", "tcp", "--dial", "5551234"], 2, "serial transport", False),
+    (["linksim", "demo", "--transport", "tcp", "--window", "4"], 2, "tcp transport has", False),
+    (["linksim", "demo", "--transport", "tcp", "--max-len", "90"], 2, "tcp transport has", False),
+    (["linksim", "relay", "--device", "/dev/null"], 1, "give exactly two devices", False),
+    (
+        ["linksim", "relay", "--device", "socket://localhost:1", "--device", "/dev/ptmx"],
+        1,
+        "socket://localhost:1 is a URL",
+        False,
+    ),
+    (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/null"], 1, "both", False),
+    (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/zero"], 1, "terminal", False),
 ]
 
 

@@ -64,6 +64,21 @@ def _finish(report: DemoReport, args: argparse.Namespace, prog: str) -> int:
     return 0
 
 
+def refuse_ignored_options(args: argparse.Namespace) -> None:
+    """Every option takes effect or is refused: these combinations would be ignored."""
+    if args.transport == "tcp" and args.dial:
+        raise ConfigError("--dial needs the serial transport (a modem carries a serial line)")
+    if args.virtual and args.dial:
+        raise ConfigError(
+            "--dial runs emulated modems between real ptys; it cannot run with --virtual"
+        )
+    if args.transport == "tcp" and (args.window is not None or args.max_len is not None):
+        raise ConfigError(
+            "--window and --max-len tune the serial socket; the tcp transport has none "
+            "(drop them, or use --transport serial)"
+        )
+
+
 def demo_main(args: argparse.Namespace) -> int:
     """``linksim demo``."""
     try:
@@ -71,8 +86,7 @@ def demo_main(args: argparse.Namespace) -> int:
         if args.config is None and preset is None:
             preset = args.preset = "noisy-moon"
         link = config_from_args(args)
-        if args.transport == "tcp" and args.dial:
-            raise ConfigError("--dial needs the serial transport (a modem carries a serial line)")
+        refuse_ignored_options(args)
         options = DemoOptions(
             link=link,
             preset=preset if args.config is None else str(args.config),

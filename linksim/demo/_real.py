@@ -7,13 +7,16 @@ Process layout of ``linksim demo`` (serial)::
     (tcpstream client over a serial socket)        (serial socket listener,
                                                     tcpstream server, simulated arm)
 
-With ``--transport tcp`` the child listens on a loopback port instead.  The
+With ``--transport tcp`` the child listens on a loopback port instead, and the
+controller reaches it through the line's delay (not its errors: TCP repairs
+those), as the virtual TCP run does.  The
 session uses a fresh random pre-shared key (handed to the child in a private
 file), so every demo run also exercises the authenticated handshake.
 """
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import json
 import os
@@ -36,9 +39,10 @@ from linksim.link import (
     RelayStatistics,
     endpoint_config_for,
     endpoint_overrides,
+    open_impaired_link,
     run_relay,
 )
-from tcpstream import SessionError, connect_stream, connect_tcp
+from tcpstream import SessionError, connect_stream
 
 from ._report import (
     IDENTITY,
@@ -51,7 +55,7 @@ from ._report import (
     make_report,
     serial_link_figures,
 )
-from ._stack import drive, new_run, run_title
+from ._stack import delay_line, drive, new_run, run_title
 
 __all__ = ["run_real"]
 
@@ -178,17 +182,53 @@ _START: contextvars.ContextVar[float] = contextvars.ContextVar("demo_start", def
 
 
 async def _tcp(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> None:
+    line = delay_line(options.link)
+    delay = line.a_to_b.delay + line.a_to_b.jitter
+    server_args = ["--transport", "tcp", "--tcp-port", "0"]
+    if delay > 0:
+        server_args += ["--delay", f"{delay:g}"]
     _say(options, "starting the arm server (loopback TCP)")
-    async with arm_server_process(["--transport", "tcp", "--tcp-port", "0"], key) as info:
+    async with arm_server_process(server_args, key) as info:
         port = int(info["tcp_port"])
-        _say(options, f"arm server listening on port {port}; connecting and authenticating")
-        async with connect_tcp("127.0.0.1", port, identity=IDENTITY, key=key) as client:
+        how = f" through a {delay:g} s one-way delay" if delay > 0 else ""
+        _say(options, f"arm server listening on port {port}; connecting{how} and authenticating")
+        async with (
+            _tcp_through(line, port) as stream,
+            connect_stream(stream, identity=IDENTITY, key=key) as client,
+        ):
             holder["run"] = run = new_run(options)
             probe = lambda: client_link_figures(client)  # noqa: E731
             await drive(client, run, options, probe, run_title(options, "loopback"))
             holder["figures"] = client_link_figures(client)
             _say(options, "closing the session")
         _say(options, "session closed; waiting for the arm server to exit")
+
+
+@asynccontextmanager
+async def _tcp_through(line: LinkConfig, port: int) -> AsyncIterator[trio.abc.Stream]:
+    """A TCP connection to the arm server on ``port`` seen through ``line`` (its
+    delay): the controller's end of an in-memory line whose far end is copied
+    to and from the socket both ways."""
+    async with (
+        await trio.open_tcp_stream("127.0.0.1", port) as tcp,
+        open_impaired_link(line) as (near, far),
+        trio.open_nursery() as nursery,
+    ):
+        nursery.start_soon(_copy, far, tcp)
+        nursery.start_soon(_copy, tcp, far)
+        try:
+            yield near
+        finally:
+            nursery.cancel_scope.cancel()
+
+
+async def _copy(source: trio.abc.Stream, sink: trio.abc.Stream) -> None:
+    """Copy until ``source`` ends or either side breaks, then close ``sink`` (the
+    other end sees the connection end, as it would have directly)."""
+    with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+        while data := await source.receive_some():
+            await sink.send_all(data)
+    await sink.aclose()
 
 
 async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> None:

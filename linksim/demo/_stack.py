@@ -73,7 +73,16 @@ async def drive(
 
 def run_title(options: DemoOptions, where: str) -> str:
     preset = options.preset or "custom link"
+    if options.transport == "tcp":
+        delay = options.link.a_to_b.delay + options.link.a_to_b.jitter
+        preset = f"{preset}: its {delay:g} s delay, TCP repairs the rest"
     return f"telelink demo: rock task over {options.transport} ({preset}, {where})"
+
+
+def delay_line(link: LinkConfig) -> LinkConfig:
+    """The line as TCP sees it: its delay and jitter, no errors (TCP repairs them)."""
+    d = link.a_to_b
+    return LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
 
 
 # --- virtual: one process, virtual clock -----------------------------------------------
@@ -89,9 +98,7 @@ async def virtual_streams(
             yield ctl, arm, lambda: serial_link_figures(ctl)
         return
     # TCP is reliable: the virtual TCP run keeps the line's delay, not its errors.
-    d = options.link.a_to_b
-    clean = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
-    async with open_impaired_link(clean) as (ctl, arm):
+    async with open_impaired_link(delay_line(options.link)) as (ctl, arm):
         yield ctl, arm, dict
 
 

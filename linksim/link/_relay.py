@@ -120,19 +120,35 @@ class _Port:
             self.drained.set()
 
 
+def _check_devices(devices: Sequence[str]) -> None:
+    """Refuse device lists the relay cannot carry, before opening anything."""
+    if len(devices) != 2:
+        raise ValueError(f"give exactly two devices (--device A --device B), not {len(devices)}")
+    for path in devices:
+        if "://" in path:
+            raise ValueError(
+                f"{path} is a URL: the relay attaches to two tty devices by path "
+                "(pyserial URLs are for the serialsocket and arm-server ports)"
+            )
+    if os.path.realpath(devices[0]) == os.path.realpath(devices[1]):
+        raise ValueError(f"both devices are {devices[0]}: give two different ttys")
+
+
 def _open_ports(devices: Sequence[str] | None) -> tuple[list[_Port], list[int]]:
     """Open the two sides; returns the ports and every fd to close at the end."""
     ports: list[_Port] = []
     fds: list[int] = []
     try:
         if devices:
-            if len(devices) != 2:
-                raise ValueError("give exactly two devices")
+            _check_devices(devices)
             for path in devices:
                 fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
                 fds.append(fd)
-                if os.isatty(fd):
-                    tty.setraw(fd)
+                if not os.isatty(fd):
+                    # A file or /dev/null reads as an endless EOF: the relay
+                    # would spin and carry nothing.
+                    raise ValueError(f"{path} is not a terminal: the relay attaches to ttys")
+                tty.setraw(fd)
                 ports.append(_Port(fd, path))
         else:
             for _ in range(2):
