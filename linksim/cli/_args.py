@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import serial
 
 from serialsocket import MAX_PACKET_LENGTH, MAX_WINDOW
+from tcpstream import load_key_file
 
 __all__ = [
     "BAUD",
@@ -177,10 +178,6 @@ SERIAL_PORT = SerialPortName()
 
 
 def read_key(path: str) -> bytes:
-    """A key file holds the pre-shared key as hex digits (whitespace ignored)."""
-    with open(path, encoding="ascii") as f:
-        text = "".join(f.read().split())
-    try:
-        return bytes.fromhex(text)
-    except ValueError:
-        raise ValueError(f"{path}: the key file must hold the key as hex digits") from None
+    """The pre-shared key in ``path``: :func:`tcpstream.load_key_file` (hex digits,
+    ``#`` comments; a file others may read is used with a warning)."""
+    return load_key_file(path)

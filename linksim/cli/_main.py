@@ -17,6 +17,7 @@ import trio
 from linksim import __version__
 from linksim._errors import ConfigError
 from linksim.link import CallOutcome, ModemConfig, ModemPair, RelayStatistics, run_relay
+from tcpstream import write_key_file
 
 from . import _armserver, _bench, _console, _demo, _soak
 from ._args import SECONDS, SECONDS_OR_ZERO, SERIAL_PORT
@@ -148,6 +149,28 @@ def relay_main(args: argparse.Namespace) -> int:
     return 0
 
 
+def keygen_main(args: argparse.Namespace) -> int:
+    """``linksim keygen FILE``: 0 when written, 1 when the file exists or cannot be made."""
+    try:
+        write_key_file(args.file)
+    except FileExistsError:
+        print(
+            f"linksim keygen: {args.file} exists; not overwriting a key (remove it first "
+            "if you mean to replace it)",
+            file=sys.stderr,
+        )
+        return 1
+    except OSError as exc:
+        print(f"linksim keygen: cannot write {args.file}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    print(
+        f"wrote a new pre-shared key to {args.file} (mode 0600): pass --key-file {args.file} "
+        "to both the arm server and the controller",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser; subcommands register here."""
     ap = argparse.ArgumentParser(prog="linksim", description="Impaired links and benchmarks.")
@@ -207,6 +230,15 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="joint trajectories of a console --log file (PNG)")
     _console.add_plot_arguments(plot)
     plot.set_defaults(func=_console.plot_main)
+    keygen = sub.add_parser(
+        "keygen",
+        help="write a new pre-shared key file (mode 0600) for --key-file",
+        description="Write a new random pre-shared key (32 bytes, hex) to FILE, readable by "
+        "its owner only; give the same file to the arm server and the controller "
+        "(--key-file FILE).  Never overwrites.",
+    )
+    keygen.add_argument("file", metavar="FILE", help="the key file to create")
+    keygen.set_defaults(func=keygen_main)
     soak_help = "hours of commands and bulk data over noisy-moon with outages (virtual time)"
     soak = sub.add_parser("soak", help=soak_help, description=f"The soak: {soak_help}.")
     _soak.add_soak_arguments(soak)
