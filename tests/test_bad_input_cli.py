@@ -145,7 +145,7 @@ LINKSIM_CASES = [
     (["--loss", "2"], "argument --loss: must be a number in [0, 1], got '2'"),
     (["--noise", "-0.1"], "argument --noise:"),
     (["--bits", "0"], "argument --bits: must be an integer in 1..64"),
-    (["--burst", "x:y"], "--burst wants"),
+    (["--burst", "x:y"], "burst wants"),
     (["--preset", "nope"], "invalid choice"),
     (["--preset", "moon", "--config", "{bad}"], "not both"),
     (["--config", "{bad}"], "invalid TOML"),
@@ -174,7 +174,7 @@ def test_linksim_relay_rejects_bad_options_before_opening_anything(
 CONFIG_TEXTS = [
     ("nope = [", "invalid TOML"),
     ("colour = 1", "unknown top-level key"),
-    ("[both]\nspeed = 3", "unknown key(s) in [both]: speed"),
+    ("[both]\nspeed = 3", "unknown key 'speed' in [both]"),
     ('[both]\nrate = "fast"', "rate must be a finite number"),
     ("[both]\nrate = inf", "rate must be a finite number"),
     ("[both]\ndelay = nan", "delay must be a finite number"),

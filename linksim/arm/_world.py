@@ -259,18 +259,48 @@ class WorldConfig:
             return "[" + ", ".join(value(x) for x in v) + "]"
 
         lines = [
-            f"{f.name} = {value(getattr(self, f.name))}"
-            for f in fields(self)
-            if f.name not in ("obstacles", "objects")
+            "# telelink arm world: linksim arm-server / demo / console --world FILE",
+            "# Lengths in metres, angles in radians, times in seconds, masses in kg.",
         ]
+        for f in fields(self):
+            if f.name in ("obstacles", "objects"):
+                continue
+            setting = f"{f.name} = {value(getattr(self, f.name))}"
+            lines.append(f"{setting.ljust(40)}  # {_WORLD_NOTES[f.name]}")
+        if self.obstacles:
+            lines += ["", "# Boxes the arm must not touch: min and max corners, m."]
         for o in self.obstacles:
             lines += ["", "[[obstacles]]", f"name = {value(o.name)}"]
             lines += [f"min = {value(o.minimum)}", f"max = {value(o.maximum)}"]
+        if self.objects:
+            lines += ["", "# Objects to grasp: centre position (m), cube size (m), mass (kg)."]
         for b in self.objects:
             lines += ["", "[[objects]]", f"name = {value(b.name)}"]
             lines += [f"position = {value(b.position)}", f"size = {value(b.size)}"]
             lines += [f"mass = {value(b.mass)}"]
         return "\n".join(lines) + "\n"
+
+
+_WORLD_NOTES = {
+    "initial_joints": "six joint angles at start, rad",
+    "initial_opening": "finger opening at start, m",
+    "max_opening": "widest finger opening, m",
+    "speed": "initial speed fraction (CHANGE_SPEED), (0, 1]",
+    "max_joint_velocity": "maximum allowed velocity per joint, rad/s",
+    "cartesian_speed": "hand speed of Level-2 paths at speed 1, m/s",
+    "blend_time": "default length of a path blend, s",
+    "finger_speed": "finger closing speed, m/s",
+    "max_grip_force": "largest grip force a command may ask, N",
+    "proximity_range": "range of the wrist proximity sensors, m",
+    "weigh_noise": "standard deviation of a weighing, kg (seeded by seed)",
+    "weigh_time": "time a weighing takes, s",
+    "clearance": "margin kept from obstacles, m",
+    "floor_z": "height of the floor, m",
+    "control_rate_hz": "servo rate of the simulation, Hz",
+    "telemetry_every": "send telemetry every N servo steps",
+    "seed": "seed of the weighing noise",
+}
+"""One line per scalar setting for :meth:`WorldConfig.to_toml`'s comments."""
 
 
 DEFAULT_WORLD = WorldConfig(

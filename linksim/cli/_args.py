@@ -19,6 +19,7 @@ import argparse
 import importlib.util
 import math
 import pkgutil
+import sys
 from dataclasses import dataclass
 
 import serial
@@ -50,6 +51,7 @@ __all__ = [
     "IntRange",
     "SerialPortName",
     "read_key",
+    "write_template",
 ]
 
 
@@ -181,3 +183,27 @@ def read_key(path: str) -> bytes:
     """The pre-shared key in ``path``: :func:`tcpstream.load_key_file` (hex digits,
     ``#`` comments; a file others may read is used with a warning)."""
     return load_key_file(path)
+
+
+def write_template(path: str, text: str, prog: str) -> int:
+    """Write a generated configuration file for ``--write-config`` / ``--write-world``.
+
+    ``-`` writes to stdout.  An existing file is never overwritten (it may be
+    the user's edited copy).  Returns the exit status: 0 written, 1 not."""
+    if path == "-":
+        sys.stdout.write(text)
+        return 0
+    try:
+        with open(path, "x", encoding="utf-8") as f:
+            f.write(text)
+    except FileExistsError:
+        print(
+            f"{prog}: {path} exists; not overwriting it (remove it, or give another name)",
+            file=sys.stderr,
+        )
+        return 1
+    except OSError as exc:
+        print(f"{prog}: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    print(f"{prog}: wrote {path}", file=sys.stderr)
+    return 0

@@ -37,6 +37,7 @@ from ._args import (
     WINDOW,
     FloatRange,
     read_key,
+    write_template,
 )
 
 __all__ = ["add_arguments", "arm_server_main"]
@@ -61,6 +62,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--window", type=WINDOW, help="serial socket window (1..31)")
     ap.add_argument("--max-len", type=ENDPOINT_LENGTH, help="serial packet length limit")
     ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument(
+        "--write-world",
+        metavar="FILE",
+        help="write the world (--world's, or the demo's table) as a commented TOML file "
+        "(- for stdout) and exit; edit it and pass it back with --world FILE",
+    )
     ap.add_argument("--key-file", help="file holding the pre-shared key (>= 16 bytes)")
     ap.add_argument(
         "--max-packet-rate",
@@ -86,6 +93,8 @@ def arm_server_main(args: argparse.Namespace) -> int:
         return 2
     try:
         world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
+        if args.write_world:
+            return write_template(args.write_world, world.to_toml(), "linksim arm-server")
         key = read_key(args.key_file) if args.key_file else None
         rate = args.rate or (args.baud if args.transport == "serial" else None)
         link = LinkConfig.symmetric(DirectionConfig(rate=rate, delay=args.delay))

@@ -18,32 +18,14 @@ __all__ = ["add_link_arguments", "config_from_args"]
 
 def _outage(text: str) -> Outage:
     try:
-        start, end = (float(x) for x in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--outage wants T1:T2 in seconds, got {text!r}") from None
-    try:
-        return Outage(start, end)
+        return Outage.parse(text)
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _burst(text: str) -> GilbertElliott:
     try:
-        values = [float(x) for x in text.split(":")]
-        if not 2 <= len(values) <= 4:
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--burst wants P_GB:P_BG[:ERROR_BAD[:ERROR_GOOD]], got {text!r}"
-        ) from None
-    values += [0.5, 0.0][len(values) - 2 :]  # defaults: error_bad 0.5, error_good 0
-    try:
-        return GilbertElliott(
-            p_good_to_bad=values[0],
-            p_bad_to_good=values[1],
-            error_bad=values[2],
-            error_good=values[3],
-        )
+        return GilbertElliott.parse(text)
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 

@@ -20,7 +20,7 @@ from linksim.link import CallOutcome, ModemConfig, ModemPair, RelayStatistics, r
 from tcpstream import write_key_file
 
 from . import _armserver, _bench, _console, _demo, _soak
-from ._args import SECONDS, SECONDS_OR_ZERO, SERIAL_PORT
+from ._args import SECONDS, SECONDS_OR_ZERO, SERIAL_PORT, write_template
 from ._link import add_link_arguments, config_from_args
 
 __all__ = ["build_parser", "main"]
@@ -39,6 +39,12 @@ def _relay_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--stats", action="store_true", help="print live counters to stderr")
     ap.add_argument("--stats-interval", type=SECONDS, default=1.0, help="seconds between counters")
     ap.add_argument("--duration", type=SECONDS, help="stop after this many seconds")
+    ap.add_argument(
+        "--write-config",
+        metavar="FILE",
+        help="write the line the options describe as a commented TOML file (- for stdout) "
+        "and exit; edit it and pass it back with --config FILE",
+    )
     m = ap.add_argument_group("modems")
     m.add_argument("--modem", action="store_true", help="put both ends behind Hayes modems")
     m.add_argument("--busy", action="append", default=[], help="number that answers BUSY")
@@ -87,6 +93,8 @@ def relay_main(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"linksim relay: {exc}", file=sys.stderr)
         return 2
+    if args.write_config:
+        return write_template(args.write_config, config.to_toml(), "linksim relay")
     modems = None
     if args.modem:
         book = dict.fromkeys(args.busy, CallOutcome.BUSY)

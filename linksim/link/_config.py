@@ -77,6 +77,31 @@ class GilbertElliott:
     error_bad: float = 0.5
     drop: bool = False
 
+    @classmethod
+    def parse(cls, text: str) -> GilbertElliott:
+        """``P_GB:P_BG[:ERROR_BAD[:ERROR_GOOD]]`` (``--burst``, or ``burst = "..."`` in TOML)."""
+        try:
+            values = [float(x) for x in text.split(":")]
+            if not 2 <= len(values) <= 4:
+                raise ValueError
+        except ValueError:
+            raise ConfigError(
+                f"burst wants P_GB:P_BG[:ERROR_BAD[:ERROR_GOOD]], got {text!r}"
+            ) from None
+        values += [0.5, 0.0][len(values) - 2 :]  # defaults: error_bad 0.5, error_good 0
+        return cls(
+            p_good_to_bad=values[0],
+            p_bad_to_good=values[1],
+            error_bad=values[2],
+            error_good=values[3],
+        )
+
+    def spec(self) -> str:
+        """The ``P_GB:P_BG:ERROR_BAD:ERROR_GOOD`` text :meth:`parse` reads (not ``drop``)."""
+        return (
+            f"{self.p_good_to_bad!r}:{self.p_bad_to_good!r}:{self.error_bad!r}:{self.error_good!r}"
+        )
+
     def __post_init__(self) -> None:
         for name in ("error_good", "error_bad"):
             _check_probability(f"burst.{name}", getattr(self, name))
@@ -97,6 +122,15 @@ class Outage:
 
     start: float
     end: float
+
+    @classmethod
+    def parse(cls, text: str) -> Outage:
+        """``T1:T2`` in seconds (``--outage``, or an ``outage`` list entry in TOML)."""
+        try:
+            start, end = (float(x) for x in text.split(":"))
+        except ValueError:
+            raise ConfigError(f"an outage is T1:T2 in seconds, got {text!r}") from None
+        return cls(start, end)
 
     def __post_init__(self) -> None:
         _check_nonnegative("outage.start", self.start)
@@ -287,9 +321,12 @@ class LinkConfig:
 
         Layout: optional top-level ``preset`` (the base) and ``seed``; a
         ``[both]`` table applied to both directions, then ``[a_to_b]`` and
-        ``[b_to_a]`` overriding it.  Direction keys are the
-        :class:`DirectionConfig` field names; ``burst`` is a table of
-        :class:`GilbertElliott` fields; ``outages`` a list of ``[start, end]``;
+        ``[b_to_a]`` overriding it.  Direction keys are the command-line flag
+        names (``rate``, ``bits``, ``delay``, ``jitter``, ``loss``, ``ber``,
+        ``noise``, ``burst``, ``outage``) or the :class:`DirectionConfig`
+        field names, one name per setting; ``burst`` is ``"P_GB:P_BG[:E_BAD[:E_GOOD]]"``
+        as on the command line or a table of :class:`GilbertElliott` fields;
+        ``outage`` a list of ``"T1:T2"`` or ``[start, end]``;
         ``faults`` an array of tables of :class:`ScriptedFault` fields with
         ``action = "drop" | "corrupt" | "insert"`` and byte strings given as
         text (each character one byte, ``"\\u0001"`` for SOH).
@@ -306,6 +343,28 @@ class LinkConfig:
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"invalid TOML: {exc}") from exc
         return cls.from_mapping(doc)
+
+    def to_toml(self) -> str:
+        """This config as a commented TOML file :meth:`from_toml` reads back equal.
+
+        Keys are the command-line flag names (``ber``, ``bits``, ``outage``...);
+        unset options appear commented out, with their units, so the file is
+        also a template (``linksim relay --write-config FILE``)."""
+        lines = [
+            "# telelink line configuration: linksim ... --config FILE",
+            "# Keys are the command-line flag names; times in seconds, rates in bit/s,",
+            "# loss / ber / noise are probabilities per byte.  A top-level",
+            '# preset = "noisy-moon" would start from a preset instead of a clean line.',
+            f"seed = {self.seed}",
+        ]
+        if self.a_to_b == self.b_to_a:
+            lines += ["", "[both]  # each direction the same; [a_to_b] / [b_to_a] override"]
+            lines += _direction_toml(self.a_to_b)
+        else:
+            for name, direction in (("a_to_b", self.a_to_b), ("b_to_a", self.b_to_a)):
+                lines += ["", f"[{name}]"]
+                lines += _direction_toml(direction)
+        return "\n".join(lines) + "\n"
 
     @classmethod
     def from_mapping(cls, doc: Mapping[str, Any]) -> LinkConfig:
@@ -326,6 +385,16 @@ class LinkConfig:
 
 
 _DIRECTION_FIELDS = {f.name for f in fields(DirectionConfig)}
+_FLAG_KEYS = {
+    # The command-line flag names (and their dashed long forms) as TOML keys.
+    "bits": "bits_per_char",
+    "bits-per-char": "bits_per_char",
+    "ber": "byte_error_rate",
+    "byte-error-rate": "byte_error_rate",
+    "outage": "outages",
+}
+_TEMPLATE_KEYS = ("rate", "bits", "delay", "jitter", "loss", "ber", "noise", "burst", "outage")
+"""The keys :meth:`LinkConfig.to_toml` writes: the ``--flag`` names."""
 _FAULT_FIELDS = {f.name for f in fields(ScriptedFault)}
 _BURST_FIELDS = {f.name for f in fields(GilbertElliott)}
 
@@ -339,26 +408,46 @@ def _as_bytes(name: str, value: Any) -> bytes:
     raise ConfigError(f"{name} must be a string, got {value!r}")
 
 
+def _outages(value: Any, where: str) -> tuple[Outage, ...]:
+    """A TOML ``outage`` list: ``[start, end]`` pairs or ``"T1:T2"`` strings."""
+    wrong = f'{where}.outages must be a list of [start, end] pairs or "T1:T2" strings'
+    if not isinstance(value, list):
+        raise ConfigError(f"{wrong}, got {value!r}")
+    spans = []
+    for entry in value:
+        if isinstance(entry, str):
+            spans.append(Outage.parse(entry))
+        elif isinstance(entry, list) and len(entry) == 2 and all(map(_is_number, entry)):
+            spans.append(Outage(float(entry[0]), float(entry[1])))
+        else:
+            raise ConfigError(f"{wrong}, got {entry!r}")
+    return tuple(spans)
+
+
 def _direction_overrides(table: Any, where: str) -> dict[str, Any]:
     """Translate one TOML direction table into DirectionConfig keyword arguments."""
     if not isinstance(table, Mapping):
         raise ConfigError(f"[{where}] must be a table")
-    unknown = set(table) - _DIRECTION_FIELDS
-    if unknown:
-        raise ConfigError(f"unknown key(s) in [{where}]: {', '.join(sorted(unknown))}")
-    out: dict[str, Any] = dict(table)
-    if "burst" in out:
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        name = _FLAG_KEYS.get(key, key)
+        if name not in _DIRECTION_FIELDS:
+            raise ConfigError(
+                f"unknown key {key!r} in [{where}]; the keys are the command-line flag names "
+                f"({', '.join(_TEMPLATE_KEYS)}) or DirectionConfig's field names"
+            )
+        if name in out:
+            raise ConfigError(f"[{where}] gives {name} twice (as {key!r} and another name)")
+        out[name] = value
+    if isinstance(out.get("burst"), str):
+        out["burst"] = GilbertElliott.parse(out["burst"])
+    elif "burst" in out:
         burst = out["burst"]
         if not isinstance(burst, Mapping) or set(burst) - _BURST_FIELDS:
             raise ConfigError(f"[{where}.burst] takes only {', '.join(sorted(_BURST_FIELDS))}")
         out["burst"] = GilbertElliott(**burst)
     if "outages" in out:
-        try:
-            out["outages"] = tuple(Outage(float(s), float(e)) for s, e in out["outages"])
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, ConfigError):
-                raise
-            raise ConfigError(f"{where}.outages must be a list of [start, end] pairs") from exc
+        out["outages"] = _outages(out["outages"], where)
     if "faults" in out:
         faults = []
         for entry in out["faults"]:
@@ -377,3 +466,69 @@ def _direction_overrides(table: Any, where: str) -> dict[str, Any]:
             faults.append(ScriptedFault(**kwargs))
         out["faults"] = tuple(faults)
     return out
+
+
+def _toml_value(value: object) -> str:
+    """A TOML literal for a number, bool, byte string (each byte one character) or None."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, bytes):
+        return '"' + "".join(_toml_char(b) for b in value) + '"'
+    return repr(value)  # an int stays an int; a float keeps its ".0" or exponent
+
+
+def _toml_char(b: int) -> str:
+    if b in (0x22, 0x5C) or b < 0x20 or b >= 0x7F:
+        return f"\\u{b:04x}"
+    return chr(b)
+
+
+def _direction_toml(d: DirectionConfig) -> list[str]:
+    """One direction's keys, commented, unset ones commented out."""
+
+    def line(key: str, value: str, comment: str, *, on: bool = True) -> str:
+        return f"{'' if on else '# '}{key} = {value}".ljust(34) + f"# {comment}"
+
+    out = [
+        line(
+            "rate",
+            _toml_value(d.rate if d.rate is not None else 9600),
+            "line rate, bit/s (absent: infinitely fast)",
+            on=d.rate is not None,
+        ),
+        line("bits", _toml_value(d.bits_per_char), "bits per character (8N1 = 10)"),
+        line("delay", _toml_value(d.delay), "one-way propagation delay, s"),
+        line("jitter", _toml_value(d.jitter), "extra delay, uniform 0..jitter s, never reorders"),
+        line("loss", _toml_value(d.loss), "probability a byte vanishes"),
+        line("ber", _toml_value(d.byte_error_rate), "probability a byte is corrupted"),
+        line("noise", _toml_value(d.noise), "probability a noise byte follows a byte"),
+    ]
+    if d.burst is None:
+        out.append(
+            line("burst", '"5e-05:0.05:0.3:0"', "Gilbert-Elliott P_GB:P_BG:E_BAD:E_GOOD", on=False)
+        )
+    elif d.burst.drop:
+        fields_ = ", ".join(
+            f"{f.name} = {_toml_value(getattr(d.burst, f.name))}" for f in fields(GilbertElliott)
+        )
+        out.append(f"burst = {{ {fields_} }}  # Gilbert-Elliott bursts that drop bytes")
+    else:
+        out.append(line("burst", f'"{d.burst.spec()}"', "Gilbert-Elliott P_GB:P_BG:E_BAD:E_GOOD"))
+    if d.outages:
+        spans = ", ".join(f'"{o.start!r}:{o.end!r}"' for o in d.outages)
+        out.append(f"outage = [{spans}]  # losses of signal, T1:T2 s of link time")
+    else:
+        out.append(line("outage", '["60:75"]', "losses of signal, T1:T2 s of link time", on=False))
+    if d.faults:
+        out.append("faults = [" + ", ".join(_fault_toml(f) for f in d.faults) + "]")
+    return out
+
+
+def _fault_toml(fault: ScriptedFault) -> str:
+    """A scripted fault as an inline table: its action and every non-default field."""
+    parts = [f'action = "{fault.action.value}"']
+    for f in fields(ScriptedFault):
+        value = getattr(fault, f.name)
+        if f.name != "action" and value is not None and value != f.default:
+            parts.append(f"{f.name} = {_toml_value(value)}")
+    return "{ " + ", ".join(parts) + " }"

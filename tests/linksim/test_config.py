@@ -115,7 +115,7 @@ def test_from_toml_text_and_file(tmp_path: pathlib.Path) -> None:
     ("text", "message"),
     [
         ("colour = 1", "unknown top-level key"),
-        ("[both]\nspeed = 1", r"unknown key\(s\) in \[both\]: speed"),
+        ("[both]\nspeed = 1", r"unknown key 'speed' in \[both\]"),
         ("[both]\nloss = 2", "loss must be a probability"),
         ("[[both.faults]]\naction = 'explode'\nbyte = 1", "action must be drop, corrupt or insert"),
         ("[both]\noutages = [[1]]", "outages must be a list of"),
