@@ -11,6 +11,10 @@ stdin and stdout are read and written in worker threads, not through
 non-blocking mode (see trio's FdStream warning), and a slow stdout must not
 stall the event loop that answers the peer's packets.
 
+``--stats`` / ``--json`` print the counters at the end on stderr (stdout
+carries the peer's data), however the run ended; a progress line is kept on
+stderr while it is a terminal (``--quiet``: none).
+
 Exit status: 0 means exactly that every byte read from stdin was
 acknowledged by the peer and every byte the peer sent was written to stdout
 (its EOF seen).  Any other ending is 1 (the link, the close or the modem
@@ -21,6 +25,7 @@ flight and never sent each way), 2 for bad options, 130 for Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import sys
@@ -86,6 +91,20 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
     )
     ap.add_argument("--dead-after", type=float, help="declare the link dead after this silence")
     ap.add_argument("--trace", action="store_true", help="log every packet, decoded, to stderr")
+    report = ap.add_argument_group(
+        "reports (on stderr: stdout carries the peer's data)",
+    )
+    report.add_argument(
+        "--stats", action="store_true", help="at the end, the counters in words, however it ended"
+    )
+    report.add_argument(
+        "--json", action="store_true", help="at the end, the counters as one JSON object"
+    )
+    report.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress line (shown only when stderr is a terminal)",
+    )
 
 
 async def _read_stdin() -> bytes:
@@ -108,6 +127,56 @@ class _Tally:
     stdin_bytes: int = 0
     stdout_bytes: int = 0
     peer_eof: bool = False
+    connected_at: float | None = None
+    """trio time of the connection (the rates count from it)."""
+    ended_at: float | None = None
+
+    def record(self, outcome: str) -> dict[str, object]:
+        """The counters for ``--stats`` / ``--json``: payload each way, the line, repairs."""
+        record: dict[str, object] = {"outcome": outcome}
+        if self.sock is None or self.connected_at is None:
+            return record | {"connected": False}
+        sock = self.sock.statistics()
+        st = sock.link
+        end = self.ended_at if self.ended_at is not None else trio.current_time()
+        seconds = max(end - self.connected_at, 1e-9)
+        record |= {
+            "connected": True,
+            "seconds": round(seconds, 3),
+            "stdin_bytes_read": self.stdin_bytes,
+            "bytes_acknowledged": st.bytes_acknowledged,
+            "bytes_in_flight": st.bytes_in_flight,
+            "stdout_bytes_written": self.stdout_bytes,
+            "peer_eof": self.peer_eof,
+            "payload_sent_Bps": round(st.bytes_acknowledged / seconds, 1),
+            "payload_received_Bps": round(self.stdout_bytes / seconds, 1),
+            "wire_bytes_sent": st.wire_bytes_sent,
+            "wire_bytes_received": st.wire_bytes_received,
+            "packets_sent": st.packets_sent,
+            "packets_received": st.packets_received,
+            "retransmissions": st.retransmissions,
+            "timeouts": st.timeouts,
+            "fast_retransmits": st.fast_retransmits,
+            "naks_sent": st.naks_sent,
+            "check_failures": st.check_failures,
+            "garbage_bytes": st.garbage_bytes,
+            "smoothed_rtt_s": None if st.smoothed_rtt is None else round(st.smoothed_rtt, 3),
+            "window": st.effective_window,
+        }
+        return record
+
+    def progress(self) -> str:
+        """One progress line: bytes each way and the rates so far."""
+        if self.sock is None or self.connected_at is None:
+            return "connecting..."
+        st = self.sock.statistics().link
+        seconds = max(trio.current_time() - self.connected_at, 1e-9)
+        return (
+            f"{seconds:7.1f} s  sent {st.bytes_acknowledged} B acknowledged "
+            f"({st.bytes_acknowledged / seconds:.0f} B/s), {st.bytes_in_flight} in flight  "
+            f"received {self.stdout_bytes} B ({self.stdout_bytes / seconds:.0f} B/s)  "
+            f"retransmissions {st.retransmissions}"
+        )
 
     def report(self) -> str:
         """How far each direction got, in bytes."""
@@ -183,10 +252,15 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
         else:
             sock = await connect(stream, cfg, nursery=nursery)
         tally.sock = sock
+        tally.connected_at = trio.current_time()
+        if args.show_progress:
+            nursery.start_soon(_show_progress, tally)
         try:
             await _pump(sock, tally)
         finally:
             await sock.aclose()
+            tally.ended_at = trio.current_time()
+            nursery.cancel_scope.cancel()  # the progress line, nothing else is left
         # Exit 0 means delivered: every byte of stdin acknowledged by the peer
         # and the peer's EOF received (so all it sent is on our stdout).  Our
         # own close ending is not that: the close says whether it was
@@ -194,6 +268,18 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
         # quietly the close ended.
         if sock.close_error is not None:
             raise IncompleteClose(sock.close_error)
+
+
+async def _show_progress(tally: _Tally) -> None:
+    """Rewrite one line on stderr (a terminal) each second; erased at the end."""
+    try:
+        while True:
+            sys.stderr.write("\r\x1b[K" + tally.progress())
+            sys.stderr.flush()
+            await trio.sleep(1.0)
+    finally:
+        sys.stderr.write("\r\x1b[K")
+        sys.stderr.flush()
 
 
 class IncompleteClose(Exception):
@@ -218,7 +304,22 @@ def netcat_main(args: argparse.Namespace, *, listening: bool) -> int:
         trace.setLevel(logging.DEBUG)
         trace.propagate = False
     name = "listen" if listening else "connect"
+    args.show_progress = not args.quiet and sys.stderr.isatty()
     tally = _Tally()
+    status = _netcat(args, listening, name, tally)
+    outcome = {0: "delivered", 2: "bad options", 130: "interrupted"}.get(status, "failed")
+    if status != 2 and (args.stats or args.json):
+        record = tally.record(outcome)
+        if args.json:
+            print(json.dumps(record), file=sys.stderr)
+        if args.stats:
+            words = ", ".join(f"{k} {v}" for k, v in record.items())
+            print(f"serialsocket {name}: {words}", file=sys.stderr)
+    return status
+
+
+def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally) -> int:
+    """The run itself; returns the exit status (reports are the caller's)."""
     try:
         try:
             trio.run(_run, args, listening, tally)

@@ -62,7 +62,7 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     (tmp_path / "down").write_bytes(download)
     with (tmp_path / "down").open("rb") as down_in:
         server = subprocess.Popen(
-            cli("listen", b, "--delay", "0.002", "--dead-after", "60"),
+            cli("listen", b, "--delay", "0.002", "--dead-after", "60", "--stats"),
             stdin=down_in,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -85,6 +85,7 @@ def test_files_both_ways_byte_exact_and_clean_exit(
                     "30",
                     "--dead-after",
                     "60",
+                    "--json",
                 ),
                 stdin=up_in,
                 capture_output=True,
@@ -101,6 +102,18 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     assert "tx I seq=0 len=33" in trace  # the connect request
     assert "rx Y seq=0" in trace  # its answer
     assert "tx D seq=1 len=128" in trace
+    # --json: the counters at the end, on stderr (stdout is the data).
+    record = json.loads(trace.splitlines()[-1])
+    assert record["outcome"] == "delivered"
+    assert record["stdin_bytes_read"] == record["bytes_acknowledged"] == len(upload)
+    assert record["stdout_bytes_written"] == len(download)
+    assert record["peer_eof"] is True
+    assert record["bytes_in_flight"] == 0
+    assert record["payload_sent_Bps"] > 0
+    # --stats: the same in words.
+    stats = server_err.decode().splitlines()[-1]
+    assert stats.startswith("serialsocket listen: outcome delivered, connected True")
+    assert f"stdout_bytes_written {len(upload)}" in stats
 
 
 def test_errors_are_reported_with_exit_status() -> None:
@@ -109,6 +122,12 @@ def test_errors_are_reported_with_exit_status() -> None:
     )
     assert missing.returncode == 1
     assert b"check the path and its permissions" in missing.stderr
+    reported = subprocess.run(
+        cli("connect", "/dev/no-such-tty-telelink", "--json"), capture_output=True, timeout=GUARD
+    )
+    assert reported.returncode == 1
+    last = reported.stderr.decode().splitlines()[-1]
+    assert json.loads(last) == {"outcome": "failed", "connected": False}
     bad = subprocess.run(
         cli("connect", "loop://", "--window", "40"), capture_output=True, timeout=GUARD
     )
