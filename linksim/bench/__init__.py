@@ -29,6 +29,7 @@ from ._latency import TRANSPORTS as LATENCY_TRANSPORTS
 from ._latency import run as run_latency
 from ._plot import plot_ber, plot_both, plot_delay
 from ._pty import DEFAULT_LENGTHS as PTY_LENGTHS
+from ._pty import PORTS as PTY_PORTS
 from ._pty import run_bench_pty
 from ._relay import measure as measure_relay
 from ._soak import SoakReport, run_soak
@@ -41,6 +42,7 @@ __all__ = [
     "KERMIT_PAIRS",
     "LATENCY_TRANSPORTS",
     "PTY_LENGTHS",
+    "PTY_PORTS",
     "SWEEPS",
     "Point",
     "SoakReport",

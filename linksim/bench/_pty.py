@@ -1,4 +1,5 @@
-"""``linksim bench pty``: SerialSocket goodput over a raw pty pair, no impairments.
+"""``linksim bench pty``: SerialSocket goodput over a raw pty pair, no impairments
+(``--port socket``: over pyserial's ``socket://``; ``--port loop``: raw ``loop://`` I/O).
 
 Two serial sockets talk over the master and slave side of one pty
 (``serialsocket.open_pty_pair``), in one process and one trio run on the wall
@@ -18,13 +19,14 @@ import cProfile
 import os
 import statistics
 import time
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
 
 import trio
 
-from serialsocket import EndpointConfig, SerialSocket, accept, connect, open_pty_pair
+from serialsocket import EndpointConfig, SerialSocket, accept, connect, open_port, open_pty_pair
 
-__all__ = ["DEFAULT_LENGTHS", "measure", "run_bench_pty"]
+__all__ = ["DEFAULT_LENGTHS", "PORTS", "measure", "run_bench_pty"]
 
 DEFAULT_LENGTHS = (128, 4096)
 _DEAD_AFTER = 60.0
@@ -34,12 +36,54 @@ _LIMIT = 300.0
 """Hang guard per transfer (s): 1 MB at a pathological 10 KB/s still fits."""
 
 
-async def _transfer(data: bytes, config: EndpointConfig) -> float:
-    """Seconds to move ``data`` from one socket to the other over a pty pair."""
-    port_a, port_b = open_pty_pair()
+PORTS = ("pty", "socket", "loop")
+"""What ``--port`` measures: the two sides of a raw pty pair; pyserial's
+``socket://`` backend (the client's port) to a loopback TCP socket; pyserial's
+``loop://``, one port that echoes itself, so only raw port I/O (no ARQ: two
+endpoints cannot share one port)."""
+
+
+@asynccontextmanager
+async def _port_pair(kind: str) -> AsyncIterator[tuple[trio.abc.Stream, trio.abc.Stream]]:
+    """Two connected ports of ``kind`` ("pty" or "socket"); closed on exit."""
+    if kind == "pty":
+        pty_a, pty_b = open_pty_pair()
+        async with pty_a, pty_b:
+            yield pty_a, pty_b
+        return
+    listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+    host, tcp_port = listeners[0].socket.getsockname()[:2]
+    async with listeners[0] as listener:
+        port_a = await open_port(f"socket://{host}:{tcp_port}")
+        async with port_a, await listener.accept() as port_b:
+            yield port_a, port_b
+
+
+async def _echo(data: bytes) -> float:
+    """Seconds to write ``data`` to ``loop://`` and read it all back (raw port I/O)."""
     received = bytearray()
     with trio.fail_after(_LIMIT):
-        async with trio.open_nursery() as nursery:
+        async with await open_port("loop://") as port, trio.open_nursery() as nursery:
+            t0 = time.perf_counter()
+
+            async def writer() -> None:
+                for i in range(0, len(data), 4096):
+                    await port.send_all(data[i : i + 4096])
+
+            nursery.start_soon(writer)
+            while len(received) < len(data):
+                received += await port.receive_some(len(data) - len(received))
+            elapsed = time.perf_counter() - t0
+    if bytes(received) != data:
+        raise AssertionError("loop:// returned other bytes than were written")
+    return elapsed
+
+
+async def _transfer(data: bytes, config: EndpointConfig, kind: str = "pty") -> float:
+    """Seconds to move ``data`` from one socket to the other over a ``kind`` port pair."""
+    received = bytearray()
+    with trio.fail_after(_LIMIT):
+        async with _port_pair(kind) as (port_a, port_b), trio.open_nursery() as nursery:
             accepted: list[SerialSocket] = []
 
             async def do_accept() -> None:
@@ -65,17 +109,25 @@ async def _transfer(data: bytes, config: EndpointConfig) -> float:
                 closing.start_soon(server.aclose)
             nursery.cancel_scope.cancel()
     if bytes(received) != data:
-        raise AssertionError("SerialSocket corrupted data on a clean pty")
+        raise AssertionError(f"SerialSocket corrupted data on a clean {kind} line")
     return elapsed
 
 
-def measure(size: int, runs: int, max_len: int, window: int) -> dict[str, object]:
-    """Median goodput of ``runs`` transfers of ``size`` bytes with ``max_len`` packets."""
+def measure(
+    size: int, runs: int, max_len: int, window: int, port: str = "pty"
+) -> dict[str, object]:
+    """Median goodput of ``runs`` transfers of ``size`` bytes with ``max_len``
+    packets over ``port`` (one of :data:`PORTS`; ``loop`` is raw port I/O)."""
     data = os.urandom(size)
     config = EndpointConfig(max_packet_length=max_len, window=window, dead_after=_DEAD_AFTER)
-    times = [trio.run(_transfer, data, config) for _ in range(runs)]
+    if port == "loop":
+        times = [trio.run(_echo, data) for _ in range(runs)]
+    else:
+        times = [trio.run(_transfer, data, config, port) for _ in range(runs)]
     median = statistics.median(times)
     return {
+        "port": port,
+        "arq": port != "loop",
         "max_packet_length": max_len,
         "window": window,
         "bytes": size,
@@ -93,14 +145,21 @@ def run_bench_pty(
     lengths: Sequence[int] = DEFAULT_LENGTHS,
     window: int = 16,
     profile: str | None = None,
+    ports: Sequence[str] = ("pty",),
 ) -> dict[str, object]:
-    """Run the benchmark for each packet length; returns the JSON record."""
-    results = [measure(size, runs, n, window) for n in lengths]
+    """Run the benchmark for each port kind and packet length; returns the JSON record."""
+    results = []
+    for port in ports:
+        if port not in PORTS:
+            raise ValueError(f"port must be one of {', '.join(PORTS)}, got {port!r}")
+        # loop:// moves raw bytes: the packet length does not apply, one row.
+        for n in lengths[:1] if port == "loop" else lengths:
+            results.append(measure(size, runs, n, window, port))
     if profile is not None:
         prof = cProfile.Profile()
         data = os.urandom(size)
         for n in lengths:
             cfg = EndpointConfig(max_packet_length=n, window=window, dead_after=_DEAD_AFTER)
-            prof.runcall(trio.run, _transfer, data, cfg)
+            prof.runcall(trio.run, _transfer, data, cfg, "pty")
         prof.dump_stats(profile)
     return {"benchmark": "pty", "cpus": os.cpu_count(), "results": results}

@@ -23,6 +23,7 @@ from linksim.bench import (
     KERMIT_PAIRS,
     LATENCY_TRANSPORTS,
     PTY_LENGTHS,
+    PTY_PORTS,
     SWEEPS,
     TransferSetup,
     bad_pairing,
@@ -393,6 +394,14 @@ def add_pty_arguments(ap: argparse.ArgumentParser) -> None:
         help="packet length (repeatable; default 128 and 4096)",
     )
     ap.add_argument("--window", type=WINDOW, default=16, help="window in packets (default 16)")
+    ap.add_argument(
+        "--port",
+        choices=PTY_PORTS,
+        action="append",
+        dest="ports",
+        help="pty (default): a raw pty pair; socket: pyserial's socket:// to loopback TCP; "
+        "loop: pyserial's loop:// echo, raw port I/O without the ARQ (repeatable)",
+    )
     ap.add_argument("--profile", metavar="FILE", help="also write a cProfile of one run per length")
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
@@ -408,15 +417,23 @@ def pty_main(args: argparse.Namespace) -> int:
         lengths=args.lengths or PTY_LENGTHS,
         window=args.window,
         profile=args.profile,
+        ports=args.ports or ("pty",),
     )
     if args.json:
         print(json.dumps(record))
         return 0
     results = record["results"]
     assert isinstance(results, list)
+    over = {"pty": "a raw pty", "socket": "pyserial socket:// (loopback TCP)"}
     for r in results:
+        if not r["arq"]:
+            print(
+                f"pyserial loop:// raw port I/O (write, read back; no ARQ): {r['MBps']} MB/s"
+                f" (median of {r['runs']} x {r['bytes']} bytes)"
+            )
+            continue
         print(
-            f"SerialSocket over a raw pty, {r['max_packet_length']}-character packets,"
+            f"SerialSocket over {over[r['port']]}, {r['max_packet_length']}-character packets,"
             f" window {r['window']}: {r['MBps']} MB/s"
             f" (median of {r['runs']} x {r['bytes']} bytes)"
         )

@@ -61,3 +61,20 @@ def test_linksim_bench_pty_command() -> None:
     )
     report = json.loads(out.stdout)
     assert [r["max_packet_length"] for r in report["results"]] == [256]
+
+
+def test_bench_pty_over_socket_and_loop_urls(capsys: pytest.CaptureFixture[str]) -> None:
+    """pyserial's socket:// carries the ARQ end to end; loop:// is a raw echo row."""
+    ap = argparse.ArgumentParser()
+    bench_cli.add_pty_arguments(ap)
+    args = ap.parse_args(
+        ["--json", "--size", "5000", "--runs", "1", "--port", "socket", "--port", "loop"]
+    )
+    assert bench_cli.pty_main(args) == 0
+    rows = json.loads(capsys.readouterr().out)["results"]
+    assert [(r["port"], r["arq"]) for r in rows] == [
+        ("socket", True),
+        ("socket", True),
+        ("loop", False),
+    ]
+    assert all(r["MBps"] > 0 for r in rows)
