@@ -15,6 +15,7 @@ values gets a panel.
 
 from __future__ import annotations
 
+import textwrap
 from collections import Counter, defaultdict
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -187,7 +188,11 @@ def _save(
         raise PlotUnavailable("no rows to plot (need >= 2 delays or error rates at one rate)")
     plt = pyplot()
     nrows = (len(panels) + columns - 1) // columns
-    fig, axes = plt.subplots(nrows, columns, figsize=(6.2 * columns, 4.6 * nrows), squeeze=False)
+    # Constrained layout reserves room for the title lines and the legend
+    # below (tight_layout with a fixed rect clipped a long subtitle).
+    fig, axes = plt.subplots(
+        nrows, columns, figsize=(6.2 * columns, 4.6 * nrows), squeeze=False, layout="constrained"
+    )
     flat = [ax for row in axes for ax in row]
     for ax, (draw, rate, rows) in zip(flat, panels, strict=False):
         draw(ax, rate, rows)
@@ -200,14 +205,14 @@ def _save(
     fig.legend(
         list(seen.values()),
         list(seen),
-        loc="lower center",
-        ncol=4,
+        loc="outside lower center",
+        ncol=min(4, columns * 2),
         fontsize="small",
         frameon=False,
     )
-    fig.suptitle(suptitle)
-    rows_of_legend = (len(seen) + 3) // 4
-    fig.tight_layout(rect=(0, 0.05 + 0.035 * rows_of_legend / nrows, 1, 0.95))
+    # Wrap each title line to the figure's width (about 11 characters an inch).
+    width = int(6.2 * columns * 11)
+    fig.suptitle("\n".join(textwrap.fill(line, width) for line in suptitle.split("\n")))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

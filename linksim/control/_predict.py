@@ -83,6 +83,8 @@ class Divergence:
     opening_error: float
     outcome: str | None
     flagged: bool
+    predicted: Feedback | None = None
+    """For a completion: the model's end state for the command (what was compared)."""
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -94,7 +96,14 @@ class Divergence:
             "opening_error_m": round(self.opening_error, 6),
             "outcome": self.outcome,
             "flagged": self.flagged,
-        }
+        } | (
+            {}
+            if self.predicted is None
+            else {
+                "predicted_joints_deg": [round(math.degrees(q), 4) for q in self.predicted.joints],
+                "predicted_opening_m": round(self.predicted.finger_opening, 6),
+            }
+        )
 
 
 def _errors(a: Feedback, b: Feedback) -> tuple[float, float, float]:
@@ -212,7 +221,7 @@ class Predictor:
             errors = _errors(outcome.feedback, feedback)
             self._base = self._base.rebased(feedback)
             self.confirmed, self.confirmed_at = feedback, now
-        return self._record(now, "completion", key, errors, mismatch)
+        return self._record(now, "completion", key, errors, mismatch, outcome.feedback)
 
     def observe(self, feedback: Feedback, now: float) -> Divergence:
         """A telemetry sample: compare it with the predicted path of the running command."""
@@ -281,11 +290,14 @@ class Predictor:
         index: int | None,
         errors: tuple[float, float, float],
         mismatch: str | None,
+        predicted: Feedback | None = None,
     ) -> Divergence:
         joint, position, opening = errors
         jt, pt, ot = self._tolerances
         flagged = mismatch is not None or joint > jt or position > pt or opening > ot
-        record = Divergence(now, source, index, joint, position, opening, mismatch, flagged)
+        record = Divergence(
+            now, source, index, joint, position, opening, mismatch, flagged, predicted
+        )
         self.records.append(record)
         self.comparisons += 1
         self.flagged += flagged

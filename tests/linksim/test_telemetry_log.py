@@ -82,6 +82,17 @@ def test_a_console_log_plots(tmp_path: pathlib.Path, capsys: pytest.CaptureFixtu
     # Telemetry every tenth control sample (seed 004), a completion per command.
     assert len(contents.reported()) > 100
     assert sum(c["event"] == "completed" for c in contents.commands) == 11
+    # What the plot draws as the model's end pose: one per completed command,
+    # at its completion, on the reported pose there (the clean run diverges
+    # nowhere), not the end of the whole queue drawn as a step.
+    predictions = [r for r in contents.other if "predicted_joints_deg" in r]
+    completions = {s["t"]: s for s in contents.states if s["source"] == "completion"}
+    assert len(predictions) == 11
+    for r in predictions:
+        reported = completions[r["t"]]["joints_deg"]
+        assert (
+            max(abs(a - b) for a, b in zip(r["predicted_joints_deg"], reported, strict=True)) < 0.5
+        )
     png = tmp_path / "run.png"
     assert main(["plot", str(log), "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
