@@ -126,13 +126,14 @@ def _link_text(link: Mapping[str, Any]) -> str:
     if isinstance(rtt, float) and math.isfinite(rtt):
         parts.append(f"RTT {rtt:.2f} s")
     for key, name in (
+        # Most telling first: a narrow live view cuts the line at its end.
         ("window_occupancy", "window"),
         ("pending", "in flight"),
-        ("packets_sent", "packets out"),
-        ("packets_received", "packets in"),
         ("retransmissions", "retransmissions"),
         ("check_failures", "check failures"),
         ("reconnects", "reconnects"),
+        ("packets_sent", "packets out"),
+        ("packets_received", "packets in"),
         ("bytes_sent", "out"),
         ("bytes_received", "in"),
     ):
@@ -220,23 +221,22 @@ _STYLE = {
 }
 
 
-FIXED_ROWS = 20
-"""Rows of the rich layout besides the command queue (title, preview, seven
-joint rows, three pose rows, the queue's header, link, two model lines,
-status, and slack for wrapping)."""
+DETAIL_LEVELS = 4
+"""How much a live frame shows, from 0 (everything) to 3 (the least): 1 drops
+the S and A vectors, 2 also the limit bars, the preview line and the pose
+table (the gripper keeps one line), 3 also the joint table (one line each for
+confirmed and predicted).  The link and model lines are never dropped."""
 
 
-def _queue_window(rows: tuple[CommandRow, ...], height: int | None) -> tuple[int, int]:
-    """Which command rows fit in ``height`` terminal rows: [start, stop).
+def _queue_window(rows: tuple[CommandRow, ...], room: int | None) -> tuple[int, int]:
+    """Which command rows fit in ``room`` terminal rows: [start, stop).
 
     The window keeps two finished commands above the first unfinished one
-    (the operator sees what just happened and what runs next); a live
-    display taller than the terminal would be cut at the bottom, where the
-    link and model lines are.
+    (the operator sees what just happened and what runs next).
     """
-    if height is None or len(rows) <= max(1, height - FIXED_ROWS):
+    if room is None or len(rows) <= max(1, room):
         return 0, len(rows)
-    room = max(1, height - FIXED_ROWS - 1)  # one row says what is hidden
+    room = max(1, room - 1)  # one row says what is hidden
     active = next(
         (i for i, r in enumerate(rows) if r.state not in ("completed", "failed")), len(rows)
     )
@@ -244,67 +244,157 @@ def _queue_window(rows: tuple[CommandRow, ...], height: int | None) -> tuple[int
     return start, start + room
 
 
-def render(s: ConsoleSnapshot, height: int | None = None) -> RenderableType:
-    """The snapshot as a rich layout: state table, command table, link and model lines.
+def _plain_table() -> Table:
+    return Table(box=None, pad_edge=False, show_edge=False)
 
-    ``height`` (terminal rows) limits the command queue to a window that fits.
-    """
-    head = Text(f"{s.title}  [{s.mode}]  t={s.clock:.2f} s", style="bold")
-    state = Table(box=None, pad_edge=False, show_edge=False)
-    for name in ("joint", "position against limits", "confirmed", "predicted", "limits"):
+
+def _joint_table(s: ConsoleSnapshot, bars: bool) -> Table:
+    state = _plain_table()
+    names = ["joint", "position against limits", "confirmed", "predicted", "limits"]
+    for name in names if bars else [n for n in names if n != "position against limits"]:
         state.add_column(name, justify="right" if name in ("confirmed", "predicted") else "left")
     for j in range(len(s.lower)):
         c = s.confirmed.joints[j] if s.confirmed else None
         p = s.predicted.joints[j] if s.predicted else None
         near = c is not None and min(c - s.lower[j], s.upper[j] - c) < math.radians(10)
-        state.add_row(
-            str(j + 1),
-            Text(_bar(c, s.lower[j], s.upper[j]) if c is not None else "", "red" if near else ""),
-            _deg(c) if c is not None else "-",
+        bar = Text(_bar(c, s.lower[j], s.upper[j]) if c is not None else "", "red" if near else "")
+        cells: list[RenderableType] = [str(j + 1)]
+        if bars:
+            cells.append(bar)
+        cells += [
+            Text(_deg(c), "red" if near else "") if c is not None else "-",
             _deg(p) if p is not None else "-",
             f"{math.degrees(s.lower[j]):.0f}..{math.degrees(s.upper[j]):.0f} deg",
-        )
-    poses = Table(box=None, pad_edge=False, show_edge=False)
-    for name in ("", "P (m)", "S", "A", "gripper", "error"):
+        ]
+        state.add_row(*cells)
+    return state
+
+
+def _pose_table(s: ConsoleSnapshot, vectors: bool) -> Table:
+    poses = _plain_table()
+    columns = ("", "P (m)", "S", "A", "gripper", "error") if vectors else ("", "P (m)", "gripper")
+    for name in columns:
         poses.add_column(name)
     for name, f in (("confirmed", s.confirmed), ("predicted", s.predicted)):
         if f is None:
-            poses.add_row(name, "-", "-", "-", "-", "-")
-        else:
+            poses.add_row(name, *["-"] * (len(columns) - 1))
+        elif vectors:
             poses.add_row(name, _xyz(f.p), _xyz(f.s), _xyz(f.a), _gripper(f), f.error.name)
-    parts: list[RenderableType] = [head]
-    if s.preview:
-        parts.append(Text("preview: " + s.preview))
-    parts += [state, poses]
-    if s.commands:
-        queue = Table(box=None, pad_edge=False, show_edge=False)
-        for name in ("#", "state", "sent", "accepted", "done", "model", "command"):
-            queue.add_column(name, justify="right" if name in ("#", "sent", "done") else "left")
-        start, stop = _queue_window(s.commands, height)
-        for r in s.commands[start:stop]:
-            label = r.label + (f"  [{r.reason}]" if r.reason else "")
-            queue.add_row(
-                str(r.index),
-                Text(r.state, _STYLE.get(r.state, "")),
-                _time(r.sent),
-                _time(r.accepted),
-                _time(r.done),
-                Text(r.predicted, "green" if r.predicted == "ok" else "bold red"),
-                label,
-            )
-        parts.append(queue)
+        else:
+            error = f"  {f.error.name}" if f.error.value else ""
+            poses.add_row(name, _xyz(f.p), _gripper(f) + error)
+    return poses
+
+
+def _joint_lines(s: ConsoleSnapshot) -> list[RenderableType]:
+    out: list[RenderableType] = []
+    for name, f in (("confirmed", s.confirmed), ("predicted", s.predicted)):
+        joints = "-" if f is None else " ".join(_deg(q).strip() for q in f.joints) + " deg"
+        gripper = "" if f is None else f", gripper {_gripper(f)}"
+        out.append(Text(f"{name}: {joints}{gripper}", no_wrap=True, overflow="ellipsis"))
+    return out
+
+
+def _queue_table(s: ConsoleSnapshot, start: int, stop: int) -> Table:
+    queue = _plain_table()
+    for name in ("#", "state", "sent", "accepted", "done", "model", "command"):
+        queue.add_column(name, justify="right" if name in ("#", "sent", "done") else "left")
+    for r in s.commands[start:stop]:
+        label = r.label + (f"  [{r.reason}]" if r.reason else "")
+        queue.add_row(
+            str(r.index),
+            Text(r.state, _STYLE.get(r.state, "")),
+            _time(r.sent),
+            _time(r.accepted),
+            _time(r.done),
+            Text(r.predicted, "green" if r.predicted == "ok" else "bold red"),
+            Text(label, no_wrap=True, overflow="ellipsis"),
+        )
+    return queue
+
+
+def _parts(
+    s: ConsoleSnapshot, detail: int, window: tuple[int, int] | None, fit: bool
+) -> list[RenderableType]:
+    """The frame at ``detail`` with the queue rows ``window`` (None: no queue).
+
+    ``fit``: the link and model lines stay one row each (cut with an ellipsis)."""
+
+    def line(text: str, style: str = "") -> Text:
+        return Text(text, style=style, no_wrap=fit, overflow="ellipsis" if fit else "fold")
+
+    parts: list[RenderableType] = [line(f"{s.title}  [{s.mode}]  t={s.clock:.2f} s", "bold")]
+    if s.preview and detail < 2:
+        parts.append(line("preview: " + s.preview))
+    if detail < 3:
+        parts.append(_joint_table(s, bars=detail < 2))
+    if detail < 2:
+        parts.append(_pose_table(s, vectors=detail < 1))
+    elif detail == 3:
+        parts += _joint_lines(s)
+    else:
+        gripper = f"gripper: confirmed {_gripper(s.confirmed)}, predicted {_gripper(s.predicted)}"
+        parts.append(line(gripper))
+    if s.commands and window is not None:
+        start, stop = window
+        parts.append(_queue_table(s, start, stop))
         hidden = len(s.commands) - (stop - start)
         if hidden:
             parts.append(
-                Text(f"   ({start} earlier, {len(s.commands) - stop} later commands not shown)")
+                line(f"   ({start} earlier, {len(s.commands) - stop} later commands not shown)")
             )
     if s.force:
-        parts.append(Text("force: " + s.force))
-    parts.append(Text("link: " + _link_text(s.link)))
-    parts.append(Text(_model_line(s), style="bold red" if s.flagged else ""))
+        parts.append(line("force: " + s.force))
+    parts.append(line("link: " + _link_text(s.link)))
+    parts.append(line(_model_line(s), "bold red" if s.flagged else ""))
     if s.status:
-        parts.append(Text(s.status, style="bold"))
-    return Group(*parts)
+        parts.append(line(s.status, "bold"))
+    return parts
+
+
+QUEUE_ROWS = 8
+"""Command rows a live frame keeps before it drops detail (or all there are)."""
+
+
+def _tables_fit(s: ConsoleSnapshot, detail: int, width: int) -> bool:
+    """The joint and pose tables at ``detail`` take one row per line at ``width``."""
+    if detail < 3 and _rows([_joint_table(s, bars=detail < 2)], width) > 1 + len(s.lower):
+        return False
+    return detail >= 2 or _rows([_pose_table(s, vectors=detail < 1)], width) <= 3
+
+
+def _rows(parts: list[RenderableType], width: int) -> int:
+    """Terminal rows ``parts`` take at ``width`` columns."""
+    out = io.StringIO()
+    Console(file=out, width=width, color_system=None, force_terminal=False).print(Group(*parts))
+    return len(out.getvalue().splitlines())
+
+
+def render(
+    s: ConsoleSnapshot, height: int | None = None, width: int | None = None
+) -> RenderableType:
+    """The snapshot as a rich layout: state table, command table, link and model lines.
+
+    With ``height`` (terminal rows; ``width`` columns, default 80) the frame
+    fits the terminal: detail is dropped step by step (:data:`DETAIL_LEVELS`)
+    until no table wraps and the queue keeps :data:`QUEUE_ROWS` rows (or all
+    it has), then the queue shows the window that fits.  The link and model lines always stay, one
+    row each.  Without ``height`` everything is shown (the final frame).
+    """
+    if height is None:
+        return Group(*_parts(s, 0, (0, len(s.commands)), fit=False))
+    columns = width or 80
+    want = min(len(s.commands), QUEUE_ROWS)
+    for detail in range(DETAIL_LEVELS):
+        if not _tables_fit(s, detail, columns):
+            continue  # a table wrapping its rows is worse than less detail
+        # The queue's header row counts as fixed; its rows get the rest.
+        fixed = _rows(_parts(s, detail, None, fit=True), columns) + (1 if s.commands else 0)
+        room = height - fixed
+        if room >= want:
+            break
+    window = _queue_window(s.commands, max(1, room))
+    return Group(*_parts(s, detail, window, fit=True))
 
 
 def render_text(s: ConsoleSnapshot, width: int = 120) -> str:
@@ -380,8 +470,10 @@ class ConsoleSession:
             print(render_plain(self.snapshot()), file=self._out, flush=True)
 
     def _render(self) -> RenderableType:
-        height = self._console.size.height if self._console is not None else None
-        return render(self.snapshot(), height)
+        if self._console is None:
+            return render(self.snapshot())
+        size = self._console.size
+        return render(self.snapshot(), size.height, size.width)
 
     def _line(self, text: str) -> None:
         if self._live is None:

@@ -160,23 +160,75 @@ def test_require_preview_sends_nothing_when_the_model_refuses(
     assert "would be refused: UNREACHABLE" in err
 
 
-def test_live_queue_shows_a_window_that_fits_the_terminal() -> None:
+def _frame(s: ConsoleSnapshot, width: int, height: int) -> list[str]:
+    out = io.StringIO()
+    Console(file=out, width=width, color_system=None).print(render(s, height, width))
+    return out.getvalue().rstrip("\n").splitlines()
+
+
+LONG_LINK = {
+    "rtt_s": 2.75,
+    "window_occupancy": "2/28",
+    "pending": 2,
+    "retransmissions": 3,
+    "check_failures": 1,
+    "reconnects": 0,
+    "packets_sent": 120,
+    "packets_received": 118,
+    "bytes_sent": 12000,
+    "bytes_received": 30000,
+}
+
+
+def _eleven(done: int) -> ConsoleSnapshot:
     rows = tuple(
-        CommandRow(i, f"command {i}", "completed" if i <= 5 else "queued", 0.0, None, None, "ok")
+        CommandRow(
+            i,
+            f"move along 2 via points to (+0.380, -0.450, -0.165) #{i}",
+            "completed" if i <= done else "queued",
+            0.0,
+            None,
+            None,
+            "ok",
+        )
         for i in range(1, 12)
     )
-    s = dataclasses.replace(snapshot(), commands=rows)
-    out = io.StringIO()
-    Console(file=out, width=120, color_system=None).print(render(s, height=24))
-    text = out.getvalue()
-    shown = [int(n) for n in re.findall(r"command (\d+)\b", text)]
-    # Room for 3 rows: two finished commands above the first unfinished one (#6).
-    assert shown == [4, 5, 6]
-    assert "(3 earlier, 5 later commands not shown)" in text
-    assert text.rstrip().splitlines()[-3].startswith("link: ")  # the model line wraps
-    assert len(text.splitlines()) <= 24
-    # Without a height (line output, the final frame) every command is shown.
-    assert all(f"command {n}" in render_text(s) for n in range(1, 12))
+    return dataclasses.replace(snapshot(), commands=rows, link=LONG_LINK)
+
+
+@pytest.mark.parametrize(("width", "height"), [(80, 24), (100, 30), (120, 24), (60, 15)])
+def test_the_live_view_fits_the_terminal_and_keeps_the_link_line(width: int, height: int) -> None:
+    lines = _frame(_eleven(done=5), width, height)
+    assert len(lines) <= height
+    assert max(len(line) for line in lines) <= width
+    # Never dropped, one row each: the link and model lines, last.
+    assert lines[-2].startswith("link: RTT 2.75 s, window 2/28")
+    assert lines[-1].startswith("model: 2 in flight")
+    queue = [int(m[1]) for line in lines if (m := re.match(r"\s*(\d+)\s+(completed|queued)", line))]
+    # Detail goes before command rows: eight of them stay (two finished ones
+    # above the first unfinished, #6), or every one that fits a tiny screen.
+    assert len(queue) >= min(8, height - 7)
+    assert 4 in queue
+    assert 6 in queue
+
+
+def test_80_by_24_drops_the_vectors_keeps_the_joint_bars() -> None:
+    text = "\n".join(_frame(_eleven(done=5), 80, 24))
+    assert "position against limits" in text  # the bars stay
+    assert " S " not in text  # S and A go
+    assert "tactile LR" in text  # the gripper stays
+    assert "(3 earlier, 0 later commands not shown)" in text
+
+
+def test_a_tall_wide_terminal_shows_everything() -> None:
+    text = "\n".join(_frame(_eleven(done=5), 140, 60))
+    assert all(f"#{n}" in text for n in range(1, 12))
+    assert "not shown" not in text
+    assert "(+0.000, +1.000, +0.000)" in text  # S
+
+
+def test_the_final_frame_shows_every_command() -> None:
+    assert all(f"#{n}" in render_text(_eleven(done=5)) for n in range(1, 12))
 
 
 def test_preview_only_connects_to_nothing(
