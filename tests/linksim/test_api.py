@@ -139,6 +139,7 @@ SUB_PACKAGE_NAMES = {
         "KERMIT_PAIRS",
         "LATENCY_TRANSPORTS",
         "PTY_LENGTHS",
+        "PTY_PORTS",
         "Point",
         "SWEEPS",
         "SoakReport",

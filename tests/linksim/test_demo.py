@@ -155,12 +155,13 @@ def test_real_time_demo_over_ptys_through_the_relay() -> None:
 
 @pytest.mark.slow
 def test_real_time_demo_over_tcp() -> None:
-    done = run_cli("demo", "--transport", "tcp", "--json")
+    # The line's delay applies to TCP too (it was ignored: loopback at full speed).
+    done = run_cli("demo", "--transport", "tcp", "--preset", "clean", "--delay", "0.2", "--json")
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert_task_done(report)
     assert report["transport"] == "tcp"
-    assert "connecting and authenticating" in done.stderr
+    assert "connecting through a 0.2 s one-way delay and authenticating" in done.stderr
     assert "session closed" in done.stderr
 
 
