@@ -278,11 +278,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _interrupted(exc: BaseException) -> bool:
-    """A Ctrl-C, alone or inside trio's exception groups (with cancellations)."""
+    """A Ctrl-C, alone or anywhere inside trio's exception groups.
+
+    The other members of such a group are its consequences (cancellations;
+    a child process in the same process group got the SIGINT too and its
+    connection broke), so the run ends as interrupted, not with them."""
     if isinstance(exc, KeyboardInterrupt):
         return True
     if isinstance(exc, BaseExceptionGroup):
-        return all(
-            _interrupted(e) or isinstance(e, trio.Cancelled) for e in exc.exceptions
-        ) and any(_interrupted(e) for e in exc.exceptions)
+        return any(_interrupted(e) for e in exc.exceptions)
     return False
