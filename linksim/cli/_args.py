@@ -18,12 +18,14 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
+import pathlib
 import pkgutil
 import sys
 from dataclasses import dataclass
 
 import serial
 
+from linksim.arm import DEFAULT_WORLD, WorldConfig
 from serialsocket import MAX_PACKET_LENGTH, MAX_WINDOW
 from tcpstream import load_key_file
 
@@ -50,6 +52,7 @@ __all__ = [
     "FloatRange",
     "IntRange",
     "SerialPortName",
+    "load_world",
     "read_key",
     "write_template",
 ]
@@ -207,3 +210,12 @@ def write_template(path: str, text: str, prog: str) -> int:
         return 1
     print(f"{prog}: wrote {path}", file=sys.stderr)
     return 0
+
+
+def load_world(arg: str | None) -> WorldConfig:
+    """``--world FILE`` (``-``: TOML on stdin); the demo's table without one."""
+    if arg is None:
+        return DEFAULT_WORLD
+    if arg == "-":
+        return WorldConfig.from_toml(sys.stdin.read())
+    return WorldConfig.from_toml(pathlib.Path(arg))

@@ -9,13 +9,12 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import pathlib
 import sys
 
 import trio
 
 import serialsocket
-from linksim.arm import DEFAULT_WORLD, SimulatedArm, WorldConfig
+from linksim.arm import SimulatedArm
 from linksim.demo import serve_arm_serial, serve_arm_tcp
 from linksim.link import (
     DirectionConfig,
@@ -36,6 +35,7 @@ from ._args import (
     TCP_PORT_OR_ANY,
     WINDOW,
     FloatRange,
+    load_world,
     read_key,
     write_template,
 )
@@ -61,7 +61,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--rate", type=BIT_RATE, help="line rate hint, bit/s (default: --baud)")
     ap.add_argument("--window", type=WINDOW, help="serial socket window (1..31)")
     ap.add_argument("--max-len", type=ENDPOINT_LENGTH, help="serial packet length limit")
-    ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument(
+        "--world", help="world configuration (TOML; - for stdin); default: the demo's table"
+    )
     ap.add_argument(
         "--write-world",
         metavar="FILE",
@@ -92,7 +94,7 @@ def arm_server_main(args: argparse.Namespace) -> int:
         )
         return 2
     try:
-        world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
+        world = load_world(args.world)
         if args.write_world:
             return write_template(args.write_world, world.to_toml(), "linksim arm-server")
         key = read_key(args.key_file) if args.key_file else None

@@ -11,18 +11,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import pathlib
 import sys
 
 import serialsocket
 from linksim._errors import ConfigError
 from linksim._plotting import PlotUnavailable
-from linksim.arm import DEFAULT_WORLD, WorldConfig, rock_task
-from linksim.control import plot_log, preview
+from linksim.arm import WorldConfig, rock_task
+from linksim.control import parse_log, plot_log, preview
 from linksim.demo import ConsoleOptions, DemoOptions, run_console
 from linksim.link import DirectionConfig, LinkConfig
 
-from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, read_key
+from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, load_world, read_key
 from ._link import add_link_arguments, config_from_args
 
 __all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
@@ -63,7 +62,9 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
         help="print what the local model predicts for the task and exit (connects to nothing)",
     )
     ap.add_argument("--log", metavar="FILE", help="write every state and command event (JSONL)")
-    ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument(
+        "--world", help="world configuration (TOML; - for stdin); default: the demo's table"
+    )
     ap.add_argument("--port", type=SERIAL_PORT, help="serial device or pty path (serial transport)")
     ap.add_argument("--baud", type=BAUD, default=9600, help="line rate, bit/s (default 9600)")
     ap.add_argument("--dial", metavar="NUMBER", help="dial NUMBER through a Hayes modem first")
@@ -78,7 +79,7 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
 def console_main(args: argparse.Namespace) -> int:
     """``linksim console``."""
     try:
-        world = WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
+        world = load_world(args.world)
         key = read_key(args.key_file) if args.key_file else None
         if args.speedup < 0 or (args.speedup and not args.virtual):
             raise ConfigError("--speedup is a positive factor for --virtual runs")
@@ -158,14 +159,17 @@ def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
 
 def add_plot_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim plot``."""
-    ap.add_argument("log", metavar="FILE", help="a telemetry log written by linksim console --log")
+    ap.add_argument(
+        "log", metavar="FILE", help="a telemetry log written by linksim console --log (- for stdin)"
+    )
     ap.add_argument("--out", required=True, metavar="PNG", help="the image to write")
 
 
 def plot_main(args: argparse.Namespace) -> int:
     """``linksim plot FILE --out PNG``."""
     try:
-        path = plot_log(args.log, args.out)
+        log = parse_log(sys.stdin, "<stdin>") if args.log == "-" else args.log
+        path = plot_log(log, args.out)
     except (PlotUnavailable, ValueError, OSError) as exc:
         print(f"linksim plot: {exc}", file=sys.stderr)
         return 1

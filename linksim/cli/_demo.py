@@ -8,7 +8,6 @@ bad options.
 from __future__ import annotations
 
 import argparse
-import pathlib
 import sys
 from functools import partial
 
@@ -16,11 +15,21 @@ import trio
 
 import serialsocket
 from linksim._errors import ConfigError
-from linksim.arm import DEFAULT_WORLD, WorldConfig
+from linksim.arm import WorldConfig
 from linksim.demo import DemoOptions, DemoReport, print_report, run_control, run_demo
 from linksim.link import DirectionConfig, LinkConfig, endpoint_config_for, endpoint_overrides
 
-from ._args import BAUD, DELAY, ENDPOINT_LENGTH, SECONDS, SERIAL_PORT, TCP_PORT, WINDOW, read_key
+from ._args import (
+    BAUD,
+    DELAY,
+    ENDPOINT_LENGTH,
+    SECONDS,
+    SERIAL_PORT,
+    TCP_PORT,
+    WINDOW,
+    load_world,
+    read_key,
+)
 from ._link import add_link_arguments, config_from_args
 
 __all__ = ["add_control_arguments", "add_demo_arguments", "control_main", "demo_main"]
@@ -32,7 +41,9 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument(
         "--max-len", type=ENDPOINT_LENGTH, help="serial packet length limit (default 128)"
     )
-    ap.add_argument("--world", help="world configuration (TOML); default: the demo's table")
+    ap.add_argument(
+        "--world", help="world configuration (TOML; - for stdin); default: the demo's table"
+    )
     ap.add_argument("--json", action="store_true", help="print the final report as JSON only")
     ap.add_argument("--plain", action="store_true", help="status lines, not a live table")
     ap.add_argument("--quiet", action="store_true", help="no progress display")
@@ -53,7 +64,7 @@ def add_demo_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def _world(args: argparse.Namespace) -> WorldConfig:
-    return WorldConfig.from_toml(pathlib.Path(args.world)) if args.world else DEFAULT_WORLD
+    return load_world(args.world)
 
 
 def _finish(report: DemoReport, args: argparse.Namespace, prog: str) -> int:

@@ -7,7 +7,8 @@
   (:class:`PreviewReport`); :class:`Predictor` keeps the predicted state
   ahead of the confirmed one and records :class:`Divergence`;
   :class:`ConsoleSession` / :class:`ConsoleSnapshot` draw it.
-* :class:`TelemetryLog` / :func:`read_log` write and read the JSON-lines log;
+* :class:`TelemetryLog` / :func:`read_log` write and read the JSON-lines log
+  (:func:`parse_log` reads it from lines, stdin for one);
   :func:`plot_log` plots it (``linksim plot``).
 """
 
@@ -19,7 +20,7 @@ from ._plot import plot_log
 from ._predict import Divergence, Predictor
 from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
 from ._progress import Progress
-from ._telemetry_log import TelemetryLog, read_log
+from ._telemetry_log import TelemetryLog, parse_log, read_log
 
 __all__ = [
     "CommandRecord",
@@ -35,6 +36,7 @@ __all__ = [
     "TaskRun",
     "TelemetryLog",
     "feedback_record",
+    "parse_log",
     "plot_log",
     "preview",
     "read_log",

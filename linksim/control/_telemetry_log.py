@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import IO, Any
 
@@ -27,7 +28,7 @@ from tcpstream import Feedback
 
 from ._control import feedback_record
 
-__all__ = ["SCHEMA", "LogContents", "TelemetryLog", "read_log"]
+__all__ = ["SCHEMA", "LogContents", "TelemetryLog", "parse_log", "read_log"]
 
 SCHEMA = 1
 """Bumped when a record changes meaning; readers refuse what they do not know."""
@@ -113,32 +114,37 @@ class LogContents:
 
 def read_log(path: str | pathlib.Path) -> LogContents:
     """Read a log; raises ``ValueError`` naming the line for anything malformed."""
-    contents: LogContents | None = None
     with pathlib.Path(path).open(encoding="utf-8") as f:
-        for number, line in enumerate(f, start=1):
-            if not line.strip():
-                continue
-            try:
-                record = json.loads(line)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"{path}:{number}: not JSON ({exc})") from None
-            if not isinstance(record, dict) or "type" not in record or "t" not in record:
-                raise ValueError(f"{path}:{number}: a record needs 'type' and 't'")
-            kind = record["type"]
-            if contents is None:
-                if kind != "header":
-                    raise ValueError(f"{path}:{number}: the first record must be the header")
-                if record.get("schema") != SCHEMA:
-                    raise ValueError(
-                        f"{path}: schema {record.get('schema')!r}, this reader knows {SCHEMA}"
-                    )
-                contents = LogContents(record)
-            elif kind == "state":
-                contents.states.append(record)
-            elif kind == "command":
-                contents.commands.append(record)
-            else:
-                contents.other.append(record)
+        return parse_log(f, str(path))
+
+
+def parse_log(lines: Iterable[str], path: str = "<log>") -> LogContents:
+    """Read a log from its lines (a file, stdin); ``path`` names it in errors."""
+    contents: LogContents | None = None
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}:{number}: not JSON ({exc})") from None
+        if not isinstance(record, dict) or "type" not in record or "t" not in record:
+            raise ValueError(f"{path}:{number}: a record needs 'type' and 't'")
+        kind = record["type"]
+        if contents is None:
+            if kind != "header":
+                raise ValueError(f"{path}:{number}: the first record must be the header")
+            if record.get("schema") != SCHEMA:
+                raise ValueError(
+                    f"{path}: schema {record.get('schema')!r}, this reader knows {SCHEMA}"
+                )
+            contents = LogContents(record)
+        elif kind == "state":
+            contents.states.append(record)
+        elif kind == "command":
+            contents.commands.append(record)
+        else:
+            contents.other.append(record)
     if contents is None:
         raise ValueError(f"{path}: empty log (no header)")
     return contents

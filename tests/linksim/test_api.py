@@ -120,6 +120,7 @@ SUB_PACKAGE_NAMES = {
         "feedback_record",
         "plot_log",
         "preview",
+        "parse_log",
         "read_log",
     ],
     "demo": [

@@ -4,6 +4,7 @@ files that read back equal."""
 
 from __future__ import annotations
 
+import io
 import pathlib
 
 import pytest
@@ -125,3 +126,22 @@ def test_arm_server_write_world_writes_the_world_it_would_run(
     assert main(["arm-server", "--world", str(edited), "--write-world", "-"]) == 0
     out = capsys.readouterr().out
     assert WorldConfig.from_toml(out).weigh_time == 1.5
+
+
+def test_world_and_plot_read_stdin_as_dash(
+    tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--world -`` and ``linksim plot -`` read stdin (a pipe from --write-world or a log)."""
+    world = DEFAULT_WORLD.to_toml().replace("weigh_time = 0.5", "weigh_time = 0.75")
+    monkeypatch.setattr("sys.stdin", io.StringIO(world))
+    out = tmp_path / "w.toml"
+    assert main(["arm-server", "--world", "-", "--write-world", str(out)]) == 0
+    assert WorldConfig.from_toml(out).weigh_time == 0.75
+    pytest.importorskip("matplotlib")
+    log = tmp_path / "run.jsonl"
+    assert main(["console", "--virtual", "--preset", "clean", "--plain", "--log", str(log)]) == 0
+    monkeypatch.setattr("sys.stdin", io.StringIO(log.read_text()))
+    png = tmp_path / "run.png"
+    assert main(["plot", "-", "--out", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    capsys.readouterr()
