@@ -13,14 +13,13 @@ Usage (the I/O adapter's loop)::
 
 Output pacing
 -------------
-When the line rate is known, the endpoint models its own UART queue
-(``line_free_at``) and releases data packets only while less than
-``horizon`` seconds of bytes are queued on the line.  Everything else waits
-inside the endpoint, where ACKs and NAKs can overtake it.  Without pacing, a
-2400 bit/s line with a few KB in the tty buffer holds every ACK for seconds
-and timers fire spuriously -- exactly how C-Kermit with 8 x 1000-byte packets
-failed on such a line (issue 3).  Each packet's timer starts when it finishes
-leaving the UART, so queueing never counts as loss.
+When the line rate is known, the endpoint models its own UART queue (a
+:class:`~serialsocket._pacer.Pacer`) and releases data packets only while
+less than two full packets' worth of bytes are queued on the line.
+Everything else waits inside the endpoint, where ACKs and NAKs can overtake
+it -- how C-Kermit with 8 x 1000-byte packets failed on a 2400 bit/s line
+without it (issue 3).  Each packet's timer starts when it finishes leaving
+the UART, so queueing never counts as loss.
 
 The effective window is the smallest of the negotiated window, the peer's
 advertised window, and the bandwidth-delay bound: the packets the line can
@@ -49,6 +48,7 @@ from ._events import (
     Event,
     LinkDead,
 )
+from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
 from ._params import InitParameters, Negotiated, negotiate
 from ._parser import PacketParser, PacketReceived, RejectReason
@@ -67,8 +67,6 @@ _INIT_MIN_FIELD = 9
 ACKs carry two or three (next expected, window, optional poll flag)."""
 
 _POLL = ord("P")
-_TIME_EPSILON = 1e-9
-"""Tolerance for comparing computed instants (far below any line's byte time)."""
 _DAMAGE = frozenset(
     {
         RejectReason.BAD_CHECK,
@@ -148,7 +146,6 @@ class Endpoint:
     _send_check: BlockCheck
     _encoding: Encoding
     _capacity: int
-    _line_free_at: float | None
     _clock: float
     _last_heard: float
     _last_probe: float
@@ -181,7 +178,9 @@ class Endpoint:
         self._parser = PacketParser(
             max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
         )
-        self._full_wire = self._max_length + 1
+        self._pacer = Pacer(
+            cfg.transmit_time, paced=cfg.line_rate is not None, full_packet=self._max_length + 1
+        )
         self._rtt = RttEstimator(
             floor=self._timeout_floor(self._max_length, self._max_length),
             # Backoff stops at a minute (or 8 initial timeouts on slower paths),
@@ -543,9 +542,7 @@ class Endpoint:
             garbage_bytes=ps.garbage_bytes,
             smoothed_rtt=self._rtt.srtt,
             timeout=self._rtt.timeout(),
-            line_backlog=0.0
-            if self._line_free_at is None
-            else max(self._line_free_at - self._clock, 0.0),
+            line_backlog=self._pacer.backlog(self._clock),
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -568,7 +565,7 @@ class Endpoint:
         self._send_check = BlockCheck.CRC16
         self._encoding = PRINTABLE
         self._capacity = 0
-        self._line_free_at = None
+        self._pacer.reset()
         self._clock = 0.0
         self._last_heard = 0.0
         self._last_probe = -math.inf
@@ -662,7 +659,7 @@ class Endpoint:
         self._sender.peer_window = agreed.window
         self._receiver.window = agreed.window
         self._receiver.capacity = data_capacity(agreed.receive_max_length, agreed.check)
-        self._full_wire = agreed.send_max_length + 1
+        self._pacer.full_packet = agreed.send_max_length + 1
         self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
         self._last_heard = now
         self._init_deadline = math.inf
@@ -841,56 +838,35 @@ class Endpoint:
         self._counters["packets_sent"] += 1
         self._counters["wire_bytes_sent"] += len(wire)
         self._clock = max(self._clock, now)
-        start = now if self._line_free_at is None else max(now, self._line_free_at)
-        self._line_free_at = start + self.config.transmit_time(len(wire))
-        return self._line_free_at
+        return self._pacer.send(len(wire), now)
 
-    def _horizon(self) -> float:
-        """Seconds of bytes allowed queued in the UART before data waits here."""
-        return 2 * self.config.transmit_time(self._full_wire)
-
-    def _line_has_room(self, now: float) -> bool:
-        if self.config.line_rate is None or self._line_free_at is None:
-            return True
-        # The same expression as _pacing_wake, so waking at that time always
-        # finds room (a float-rounding mismatch here would spin forever).
-        return now >= self._line_free_at - self._horizon() - _TIME_EPSILON
+    @property
+    def _full_wire(self) -> int:
+        """Wire bytes of a full data packet (the negotiated length once connected)."""
+        return self._pacer.full_packet
 
     def _pacing_wake(self) -> float | None:
         s = self._sender
         wants = bool(s.retransmit) or (s.has_new_data() and s.room(self._effective_window()) > 0)
         if not wants:
             return None
-        if self.config.line_rate is None or self._line_free_at is None:
-            return None
-        return self._line_free_at - self._horizon()
+        return self._pacer.wake()
 
     def _release_data(self, now: float, out: list[bytes]) -> None:
         s = self._sender
         timeout = self._rtt.timeout()
-        while s.retransmit and self._line_has_room(now):
+        while s.retransmit and self._pacer.has_room(now):
             pkt = s.outstanding[s.retransmit.popleft()]
             self._counters["retransmissions"] += 1
             self._transmit(pkt, now, timeout, out)
         if s.retransmit:
             return
-        while self._line_has_room(now):
+        while self._pacer.has_room(now):
             room = s.room(self._effective_window())
             if room <= 0 or not s.has_new_data():
                 return
             if s.queue:
-                batch = room
-                if self.config.line_rate is not None and self._line_free_at is not None:
-                    spare = self._horizon() - max(self._line_free_at - now, 0.0)
-                    batch = max(
-                        1,
-                        min(
-                            room,
-                            math.ceil(
-                                spare / max(self.config.transmit_time(self._full_wire), 1e-9)
-                            ),
-                        ),
-                    )
+                batch = self._pacer.batch(room, now)
                 for field, used in self._encoding.encode_fields(s.queue, self._capacity, batch):
                     wire = build_packet(
                         Packet(seq=s.next % 64, type=PacketType.DATA, data=field), self._send_check
@@ -933,7 +909,7 @@ class Endpoint:
         arrive just too early, and stop-and-wait waited for the timeout.)
         """
         nak = len(build_packet(Packet(seq=0, type=PacketType.NAK), self._send_check))
-        return 2 * self.config.one_way_delay + self.config.transmit_time(nak) - _TIME_EPSILON
+        return 2 * self.config.one_way_delay + self.config.transmit_time(nak) - TIME_EPSILON
 
     def _effective_window(self) -> int:
         key = (self._sender.window, self._rtt.srtt, self._full_wire)

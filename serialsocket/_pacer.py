@@ -1,0 +1,89 @@
+"""Output pacing: the endpoint's model of its own UART queue (sans-I/O).
+
+When the line rate is known, the endpoint tracks when the bytes it has handed
+to the line will have finished leaving the UART (``free_at``) and releases
+data packets only while less than :meth:`Pacer.horizon` seconds of bytes are
+queued there.  Everything else waits inside the endpoint, where ACKs and NAKs
+can overtake it.  Without pacing, a 2400 bit/s line with a few KB in the tty
+buffer holds every ACK for seconds and timers fire spuriously (issue 3).
+
+Nothing here reads a clock: every method that depends on time takes ``now``.
+With the line rate unknown (``paced=False``) the line always has room and
+nothing is held back.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+__all__ = ["TIME_EPSILON", "Pacer"]
+
+TIME_EPSILON = 1e-9
+"""Tolerance for comparing computed instants (far below any line's byte time)."""
+
+
+class Pacer:
+    """When the line will be free, and whether data may join its queue now.
+
+    Args:
+        transmit_time: seconds the UART needs for a number of wire bytes
+            (:meth:`EndpointConfig.transmit_time`).
+        paced: the line rate is known; without it nothing is held back.
+        full_packet: wire bytes of a full data packet (the horizon is two of
+            them); updated once the packet length is negotiated.
+    """
+
+    def __init__(
+        self, transmit_time: Callable[[int], float], *, paced: bool, full_packet: int
+    ) -> None:
+        self._transmit_time = transmit_time
+        self.paced = paced
+        self.full_packet = full_packet
+        self.free_at: float | None = None
+        """When the last byte handed to the line finishes leaving the UART
+        (None before the first packet of a connection)."""
+
+    def reset(self) -> None:
+        """A new connection: the line is idle."""
+        self.free_at = None
+
+    def send(self, wire_bytes: int, now: float) -> float:
+        """Count ``wire_bytes`` handed to the line at ``now``; returns when they
+        finish leaving the UART (after whatever was queued before them)."""
+        start = now if self.free_at is None else max(now, self.free_at)
+        self.free_at = start + self._transmit_time(wire_bytes)
+        return self.free_at
+
+    def horizon(self) -> float:
+        """Seconds of bytes allowed queued in the UART before data waits here."""
+        return 2 * self._transmit_time(self.full_packet)
+
+    def has_room(self, now: float) -> bool:
+        """Data may be handed to the line at ``now``."""
+        if not self.paced or self.free_at is None:
+            return True
+        # The same expression as wake(), so waking at that time always finds
+        # room (a float-rounding mismatch here would spin forever).
+        return now >= self.free_at - self.horizon() - TIME_EPSILON
+
+    def wake(self) -> float | None:
+        """When the line will next have room, or None if it is never held back."""
+        if not self.paced or self.free_at is None:
+            return None
+        return self.free_at - self.horizon()
+
+    def batch(self, room: int, now: float) -> int:
+        """How many of ``room`` full packets to release at once (at least one):
+        as many as fill the horizon's spare time."""
+        if not self.paced or self.free_at is None:
+            return room
+        spare = self.horizon() - max(self.free_at - now, 0.0)
+        return max(
+            1,
+            min(room, math.ceil(spare / max(self._transmit_time(self.full_packet), 1e-9))),
+        )
+
+    def backlog(self, now: float) -> float:
+        """Seconds of bytes still queued in the UART at ``now``."""
+        return 0.0 if self.free_at is None else max(self.free_at - now, 0.0)
