@@ -55,7 +55,18 @@ from ._parser import PacketParser, PacketReceived, RejectReason
 from ._receiver import Receiver
 from ._rtt import RttEstimator
 from ._sender import Outstanding, Sender
-from ._state import TERMINAL, State, Trigger, transition
+from ._state import (
+    CONNECTED,
+    DEAF,
+    LIVE,
+    PEER_MAY_ABORT,
+    TERMINAL,
+    WRITABLE,
+    State,
+    Trigger,
+    allowed,
+    transition,
+)
 from ._wire import PacketType, tochar, unchar
 
 __all__ = ["Endpoint", "EndpointStatistics"]
@@ -254,7 +265,7 @@ class Endpoint:
             LocalProtocolError: after ``send_eof``/``close``, or once the
                 connection has ended.
         """
-        if self._state in TERMINAL or self._state is State.LINGER:
+        if self._state not in WRITABLE:
             raise LocalProtocolError(f"cannot send: the connection is {self._state.value}")
         if self._sender.eof_requested:
             raise LocalProtocolError("cannot send after send_eof() or close()")
@@ -284,7 +295,7 @@ class Endpoint:
         no packet of ours newly acknowledged and nothing new in order from the
         peer.  Each such step re-arms the deadline (see :meth:`get_timer`).
         A silent link is judged dead after ``dead_after`` as always."""
-        if self._state in TERMINAL or self._state is State.LINGER:
+        if self._state not in WRITABLE:
             return
         if self._state is State.ESTABLISHED and self._close_deadline == math.inf:
             self._close_patience = self._dead_after if patience is None else patience
@@ -294,12 +305,12 @@ class Endpoint:
         self._receiver.discard = True
         self._receiver.discarded_total += len(self._receiver.readable)
         self._receiver.readable.clear()
-        if self._state in (State.IDLE, State.LISTEN):
+        if allowed(self._state, Trigger.CLOSE):
             self._go(Trigger.CLOSE)
 
     def abort(self, reason: str, now: float) -> None:
         """End the connection at once, telling the peer why (an E packet)."""
-        if self._state in TERMINAL or self._state is State.IDLE:
+        if self._state not in LIVE:
             return
         self._finish_abort(reason, by_peer=False, send=True)
 
@@ -395,7 +406,7 @@ class Endpoint:
                 nak = self._receiver.gap_to_nak(now, self._rtt.timeout())
                 if nak is not None:
                     self._queue_nak(nak)
-            if self._state in TERMINAL and self._state is not State.FAILED:
+            if self._state in DEAF:
                 break
 
     def data_to_send(self, now: float) -> bytes:
@@ -411,20 +422,21 @@ class Endpoint:
 
     def get_timer(self) -> float | None:
         """When :meth:`handle_timer` must next be called, or None."""
-        st = self._state
-        if st is State.CONNECTING:
-            return min(self._init_deadline, self._connect_deadline)
-        if st is State.LINGER:
-            return self._linger_until
-        if st is not State.ESTABLISHED:
-            return None
-        times = [self._last_heard + self._dead_after, self._next_probe_time()]
-        if self._close_deadline < math.inf:
-            times.append(self._close_deadline)
-        deadline = self._sender.next_deadline()
-        if deadline is not None:
-            times.append(deadline)
-        return min(times)
+        match self._state:
+            case State.CONNECTING:
+                return min(self._init_deadline, self._connect_deadline)
+            case State.LINGER:
+                return self._linger_until
+            case State.ESTABLISHED:
+                times = [self._last_heard + self._dead_after, self._next_probe_time()]
+                if self._close_deadline < math.inf:
+                    times.append(self._close_deadline)
+                deadline = self._sender.next_deadline()
+                if deadline is not None:
+                    times.append(deadline)
+                return min(times)
+            case _:
+                return None
 
     def get_send_timer(self) -> float | None:
         """When :meth:`data_to_send` will next release paced data, or None.
@@ -440,58 +452,14 @@ class Endpoint:
 
     def handle_timer(self, now: float) -> None:
         """Run whatever timers are due at ``now`` (safe to call early)."""
-        st = self._state
-        if st is State.CONNECTING:
-            if now >= self._connect_deadline:
-                self._go(Trigger.CONNECT_TIMEOUT)
-                self._events.append(
-                    ConnectionAborted(
-                        reason=(
-                            "no answer to connect within "
-                            f"{self.config.derived_connect_timeout():.1f} s"
-                        ),
-                        by_peer=False,
-                    )
-                )
-            elif now >= self._init_deadline:
-                self._rtt.on_timeout()
-                self._counters["timeouts"] += 1
-                self._send_init(now)
-            return
-        if st is State.LINGER:
-            if now >= self._linger_until:
-                self._go(Trigger.LINGER_EXPIRED)
-            return
-        if st is not State.ESTABLISHED:
-            return
-        silence = now - self._last_heard
-        # Compare exactly as get_timer computes the deadline: rearranged, float
-        # rounding can leave the timer due but never firing (a spin).
-        if now >= self._last_heard + self._dead_after:
-            self._declare_dead(silence)
-            return
-        if now >= self._close_deadline:
-            # Checked after the silence verdict: a dead link is reported as dead.
-            self._finish_abort(
-                f"close made no progress for {self._close_patience:.1f} s", by_peer=False, send=True
-            )
-            return
-        expired = self._sender.expired(now)
-        if expired:
-            self._counters["timeouts"] += 1
-            self._rtt.on_timeout()
-            limit = self.config.max_retries
-            for seq in expired:
-                pkt = self._sender.outstanding[seq]
-                if limit is not None and pkt.transmissions > limit:
-                    self._finish_abort(
-                        f"Too many retries (packet {seq % 64})", by_peer=False, send=True
-                    )
-                    return
-                self._sender.schedule(seq)
-        if now >= self._next_probe_time():
-            self._last_probe = now
-            self._queue_ack(self._receiver.last_in_order(), poll=True)
+        match self._state:
+            case State.CONNECTING:
+                self._connecting_timer(now)
+            case State.LINGER:
+                if now >= self._linger_until:
+                    self._go(Trigger.LINGER_EXPIRED)
+            case State.ESTABLISHED:
+                self._established_timer(now)
 
     def events(self) -> list[Event]:
         """Take all pending events."""
@@ -612,7 +580,7 @@ class Endpoint:
             else:
                 self._answer_init()  # Our answer was lost; say it again.
             return
-        if st not in (State.LISTEN, State.CONNECTING):
+        if not allowed(st, Trigger.INIT_RECEIVED):
             return
         try:
             theirs = InitParameters.decode(packet.data)
@@ -631,7 +599,7 @@ class Endpoint:
         self._establish(agreed, now, answer=True)
 
     def _on_init_answer(self, packet: Packet, now: float) -> None:
-        if self._state is not State.CONNECTING:
+        if not allowed(self._state, Trigger.INIT_ACKED):
             return
         try:
             agreed = negotiate(self._mine, InitParameters.decode(packet.data))
@@ -681,7 +649,7 @@ class Endpoint:
         )
 
     def _finish_abort(self, reason: str, *, by_peer: bool, send: bool) -> None:
-        established = self._state in (State.ESTABLISHED, State.LINGER)
+        established = self._state in CONNECTED
         if send:
             self._queue_error(reason)
             self._abort_reason = reason
@@ -692,6 +660,7 @@ class Endpoint:
         )
 
     def _declare_dead(self, silence: float) -> None:
+        """Only from :meth:`_established_timer`: the table's one LINK_DEAD edge."""
         s = self._sender
         self._events.append(
             LinkDead(
@@ -720,13 +689,13 @@ class Endpoint:
         if ptype == PacketType.INIT:
             self._on_init(packet, now)
         elif ptype == PacketType.ERROR:
-            if self._state in (State.CONNECTING, State.ESTABLISHED, State.LINGER):
+            if self._state in PEER_MAY_ABORT:
                 reason = self._safe_text(packet.data)
                 self._finish_abort(reason, by_peer=True, send=False)
         elif ptype == PacketType.ACK:
             if len(packet.data) >= _INIT_MIN_FIELD:
                 self._on_init_answer(packet, now)
-            elif self._state in (State.ESTABLISHED, State.LINGER):
+            elif self._state in CONNECTED:
                 self._on_ack(packet, now)
         elif ptype == PacketType.NAK:
             if self._state is State.ESTABLISHED:
@@ -736,7 +705,7 @@ class Endpoint:
                 if self._sender.packets_acked > acked:  # stop-and-wait NAK(n+1) = ACK(n)
                     self._rtt.on_progress()
         elif ptype in (PacketType.DATA, PacketType.EOF):
-            if self._state in (State.ESTABLISHED, State.LINGER):
+            if self._state in CONNECTED:
                 self._on_data(packet, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
@@ -799,7 +768,8 @@ class Endpoint:
             self._close_deadline = now + self._close_patience
 
     def _check_closed(self, now: float) -> None:
-        if self._state is State.ESTABLISHED and self._sender.eof_acked and self._receiver.eof:
+        both_closed = self._sender.eof_acked and self._receiver.eof
+        if both_closed and allowed(self._state, Trigger.BOTH_CLOSED):
             self._go(Trigger.BOTH_CLOSED)
             # The peer resends its EOF on its own, possibly backed-off, timer: stay
             # as long as it could keep trying before it would declare us dead.
@@ -884,6 +854,53 @@ class Endpoint:
         pkt.deadline = pkt.done_at + timeout
 
     # -- internals: timing --------------------------------------------------------------
+
+    def _connecting_timer(self, now: float) -> None:
+        """CONNECTING: give up at the connect deadline, else resend the init when due."""
+        if now >= self._connect_deadline:
+            self._go(Trigger.CONNECT_TIMEOUT)
+            self._events.append(
+                ConnectionAborted(
+                    reason="no answer to connect within "
+                    f"{self.config.derived_connect_timeout():.1f} s",
+                    by_peer=False,
+                )
+            )
+        elif now >= self._init_deadline:
+            self._rtt.on_timeout()
+            self._counters["timeouts"] += 1
+            self._send_init(now)
+
+    def _established_timer(self, now: float) -> None:
+        """ESTABLISHED: the silence verdict, the close deadline, retransmissions, probes."""
+        silence = now - self._last_heard
+        # Compare exactly as get_timer computes the deadline: rearranged, float
+        # rounding can leave the timer due but never firing (a spin).
+        if now >= self._last_heard + self._dead_after:
+            self._declare_dead(silence)
+            return
+        if now >= self._close_deadline:
+            # Checked after the silence verdict: a dead link is reported as dead.
+            self._finish_abort(
+                f"close made no progress for {self._close_patience:.1f} s", by_peer=False, send=True
+            )
+            return
+        expired = self._sender.expired(now)
+        if expired:
+            self._counters["timeouts"] += 1
+            self._rtt.on_timeout()
+            limit = self.config.max_retries
+            for seq in expired:
+                pkt = self._sender.outstanding[seq]
+                if limit is not None and pkt.transmissions > limit:
+                    self._finish_abort(
+                        f"Too many retries (packet {seq % 64})", by_peer=False, send=True
+                    )
+                    return
+                self._sender.schedule(seq)
+        if now >= self._next_probe_time():
+            self._last_probe = now
+            self._queue_ack(self._receiver.last_in_order(), poll=True)
 
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue
