@@ -170,8 +170,12 @@ class TaskRun:
 
     @property
     def final_feedback(self) -> Feedback | None:
-        """The arm state after the last command that completed."""
-        done = [(r.done_at or 0.0, r.result) for r in self.records if r.result is not None]
+        """The arm state after the last command that completed.
+
+        The last in request order (the arm runs them in that order): replies
+        held up on the line arrive together, with one timestamp, so the time
+        they were seen cannot tell which ran last."""
+        done = [(r.index, r.result) for r in self.records if r.result is not None]
         return max(done, key=lambda d: d[0])[1].feedback if done else None
 
     @property

@@ -9,7 +9,7 @@ import trio
 import trio.testing
 
 import linksim.link._virtual as virtual
-from linksim import TaskRun
+from linksim import DEFAULT_WORLD, TaskRun, rock_task
 from tcpstream import (
     ArmClient,
     Command,
@@ -17,6 +17,7 @@ from tcpstream import (
     CommandFailed,
     CommandResult,
     FailureReason,
+    Feedback,
     Server,
     commands,
 )
@@ -73,3 +74,17 @@ def test_replies_that_arrive_together_are_applied_in_request_order(
     assert done[:3] == [(1, "completed"), (2, "completed"), (3, "failed")], events
     accepted = [i for i, s in events if s == "accepted"]
     assert accepted == sorted(accepted), events
+
+
+def test_the_final_pose_is_the_last_command_s_when_replies_arrive_together() -> None:
+    """Completions held up on a line (an outage, a TCP stall) arrive in one
+    burst with one timestamp: the report's final pose is the last command's
+    (it was whichever of the tied ones came first: the bin, not home)."""
+    run = TaskRun(rock_task(DEFAULT_WORLD).commands)
+    poses = {}
+    for record in run.records:
+        pose = Feedback(joints=(record.index * 0.01, 0.0, 0.0, 0.0, 0.0, 0.0))
+        poses[record.index] = pose
+        record.result = CommandResult(pose)
+        record.done_at = 42.0  # all seen at the same moment
+    assert run.final_feedback == poses[len(run.records)]
