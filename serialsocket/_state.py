@@ -3,9 +3,11 @@
 Rule 1: the state changes only through :func:`transition`, with a trigger from
 :class:`Trigger`.  Rule 2: a (state, trigger) pair missing from ``TRANSITIONS``
 is a bug in the caller -- :func:`transition` raises LocalProtocolError and the
-state does not change.  Rule 3: the endpoint asks this module, through the
-named state sets below (:data:`LIVE`, :data:`WRITABLE`, ...) and
-:func:`allowed`, rather than listing states itself.
+state does not change.  Rule 3: where a behaviour spans several states, the
+endpoint asks this module -- the named state sets below (:data:`LIVE`,
+:data:`WRITABLE`, ...), or :func:`allowed` right before the transition it
+guards -- rather than listing states itself; a check for one state (mostly
+ESTABLISHED, the only state in which data packets go out) names that state.
 
 ``TRANSITIONS`` is the diagram: PROTOCOL.md section 7 prints it, as
 :func:`serialsocket._diagram.render` renders it (a test keeps the two equal).
