@@ -84,10 +84,7 @@ from hypothesis.stateful import (
 )
 
 from serialsocket import (
-    EIGHT_BIT_CLEAN,
-    MAX_PACKET_LENGTH,
     MAX_WINDOW,
-    PRINTABLE,
     Connected,
     ConnectionAborted,
     ConnectionClosed,
@@ -98,6 +95,7 @@ from serialsocket import (
     LinkDead,
     State,
 )
+from serialsocket.packets import EIGHT_BIT_CLEAN, MAX_PACKET_LENGTH, PRINTABLE
 
 __all__ = [
     "FINISH_MAX_EVENTS",

@@ -26,17 +26,13 @@ from fuzz._reader import Reader
 
 with instrumented(__name__ == "__main__"):
     from serialsocket import (
-        EIGHT_BIT_CLEAN,
-        PRINTABLE,
-        BlockCheck,
         ConnectionRequested,
         Endpoint,
         EndpointConfig,
         LocalProtocolError,
-        Packet,
         State,
-        build_packet,
     )
+    from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, BlockCheck, Packet, build_packet
 
 _TYPES = "DYNZEISBFXAR?"
 _TIMER_SPIN_LIMIT = 64

@@ -1,7 +1,7 @@
 """atheris harness: the Kermit packet parser and the prefix decoders.
 
 Input: a byte stream cut into chunks at positions the fuzzer chooses, fed to a
-:class:`~serialsocket.PacketParser` whose ``max_length`` and expected block
+:class:`~serialsocket.packets.PacketParser` whose ``max_length`` and expected block
 check are also chosen by the fuzzer.  Properties (any violation raises):
 
 * the parser never raises on input: damage is a counted ``PacketRejected``;
@@ -19,11 +19,11 @@ import sys
 from fuzz._instrument import instrumented
 
 with instrumented(__name__ == "__main__"):
-    from serialsocket import (
+    from serialsocket import MalformedDataError
+    from serialsocket.packets import (
         EIGHT_BIT_CLEAN,
         PRINTABLE,
         BlockCheck,
-        MalformedDataError,
         PacketParser,
         PacketReceived,
         PacketRejected,

@@ -10,7 +10,7 @@ files are committed (.gitignore).
 from __future__ import annotations
 
 from fuzz._atheris import CORPUS
-from serialsocket import BlockCheck, Packet, build_packet
+from serialsocket.packets import BlockCheck, Packet, build_packet
 from tcpstream import Packet as CommandPacket
 from tcpstream import PacketKind, commands, encode_packet
 from tcpstream._packet import words_body

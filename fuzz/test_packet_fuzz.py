@@ -11,10 +11,10 @@ from collections.abc import Callable
 from hypothesis import given
 from hypothesis import strategies as st
 
-from serialsocket import (
+from serialsocket import MalformedDataError
+from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
-    MalformedDataError,
     PacketParser,
     PacketReceived,
     build_packet,

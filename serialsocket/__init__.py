@@ -3,20 +3,23 @@
 Layer 1, port I/O: :func:`open_port` opens a serial device, a pty or a
 pyserial URL as a trio stream (8N1, raw); :func:`open_pty_pair` makes a
 connected raw pty pair; :func:`dial`, :func:`answer` and :func:`hangup` drive
-a Hayes modem.  Layer 2, packets: Kermit packets with CRC-16/KERMIT block
-checks, the prefix encoding that keeps packets printable, and an incremental
-parser that survives any line noise.  Layer 3, ARQ: :class:`Endpoint`, a
-connected, reliable, sequenced, full-duplex byte stream with selective-repeat
-windows and timers sized for slow, long-delay lines.  Layers 2 and 3 are
-sans-I/O: bytes and ``now`` in, bytes, events and timer deadlines out.
+a Hayes modem.  Layer 2, packets (:mod:`serialsocket.packets`): Kermit
+packets with CRC-16/KERMIT block checks, the prefix encoding that keeps
+packets printable, and an incremental parser that survives any line noise.
+Layer 3, ARQ: :class:`Endpoint`, a connected, reliable, sequenced,
+full-duplex byte stream with selective-repeat windows and timers sized for
+slow, long-delay lines.  Layers 2 and 3 are sans-I/O: bytes and ``now`` in,
+bytes, events and timer deadlines out.
 
 :class:`SerialSocket` (``connect``, ``accept``, ``listen``, ``serve``) runs
 the endpoint over a port as a trio ``HalfCloseableStream``;
 :class:`BlockingSerialSocket` offers the same to code that is not async.
+:class:`EndpointConfig`'s ``check`` and ``encoding`` come from
+:mod:`serialsocket.packets`.
 
-Kermit file transfer on the same packet layer: :class:`KermitSender` and
-:class:`KermitReceiver` (sans-I/O), :func:`kermit_send` and
-:func:`kermit_receive` over a port; interoperates with C-Kermit and G-Kermit
+Kermit file transfer on the same packet layer is :mod:`serialsocket.kermit`
+(sans-I/O sender and receiver, ``kermit_send`` / ``kermit_receive`` over a
+port); it interoperates with C-Kermit and G-Kermit
 (``python -m serialsocket kermit send|receive``; serialsocket/KERMIT.md).
 """
 
@@ -31,18 +34,12 @@ except _NotInstalled:  # imported from a source tree that was never installed
 
 
 from ._blocking import BlockingSerialSocket as BlockingSerialSocket
-from ._checks import BlockCheck as BlockCheck
-from ._checks import check_chars as check_chars
-from ._checks import crc16_kermit as crc16_kermit
 from ._config import MAX_WINDOW as MAX_WINDOW
 from ._config import EndpointConfig as EndpointConfig
 from ._driver import LineFailed as LineFailed
 from ._driver import LinkBroken as LinkBroken
 from ._driver import LinkDeadError as LinkDeadError
 from ._driver import PeerAborted as PeerAborted
-from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
-from ._encoding import PRINTABLE as PRINTABLE
-from ._encoding import Encoding as Encoding
 from ._endpoint import Endpoint as Endpoint
 from ._endpoint import EndpointStatistics as EndpointStatistics
 from ._errors import LocalProtocolError as LocalProtocolError
@@ -67,34 +64,6 @@ from ._hayes import NoDialtone as NoDialtone
 from ._hayes import answer as answer
 from ._hayes import dial as dial
 from ._hayes import hangup as hangup
-from ._kermit import FileCompleted as FileCompleted
-from ._kermit import FileData as FileData
-from ._kermit import FileStarted as FileStarted
-from ._kermit import KermitEvent as KermitEvent
-from ._kermit import KermitState as KermitState
-from ._kermit import KermitStatistics as KermitStatistics
-from ._kermit import OutgoingFile as OutgoingFile
-from ._kermit import TransferComplete as TransferComplete
-from ._kermit import TransferFailed as TransferFailed
-from ._kermit_io import KermitTransferError as KermitTransferError
-from ._kermit_io import kermit_receive as kermit_receive
-from ._kermit_io import kermit_send as kermit_send
-from ._kermit_params import KermitConfig as KermitConfig
-from ._kermit_receiver import KermitReceiver as KermitReceiver
-from ._kermit_sender import KermitSender as KermitSender
-from ._packet import Packet as Packet
-from ._packet import build_packet as build_packet
-from ._packet import data_capacity as data_capacity
-from ._packet import packet_length as packet_length
-from ._params import PROTOCOL_VERSION as PROTOCOL_VERSION
-from ._params import InitParameters as InitParameters
-from ._params import Negotiated as Negotiated
-from ._parser import PacketParser as PacketParser
-from ._parser import PacketReceived as PacketReceived
-from ._parser import PacketRejected as PacketRejected
-from ._parser import ParserEvent as ParserEvent
-from ._parser import ParserStatistics as ParserStatistics
-from ._parser import RejectReason as RejectReason
 from ._port import PortStatistics as PortStatistics
 from ._port import SerialPort as SerialPort
 from ._port import open_port as open_port
@@ -108,43 +77,20 @@ from ._socket import listen as listen
 from ._socket import open_serial_socket as open_serial_socket
 from ._socket import serve as serve
 from ._state import State as State
-from ._wire import DEFAULT_MAX_PACKET_LENGTH as DEFAULT_MAX_PACKET_LENGTH
-from ._wire import MAX_PACKET_LENGTH as MAX_PACKET_LENGTH
-from ._wire import MIN_PACKET_LENGTH as MIN_PACKET_LENGTH
-from ._wire import PacketType as PacketType
 
 __all__ = [
-    "DEFAULT_MAX_PACKET_LENGTH",
-    "EIGHT_BIT_CLEAN",
-    "MAX_PACKET_LENGTH",
     "MAX_WINDOW",
-    "MIN_PACKET_LENGTH",
-    "PRINTABLE",
-    "PROTOCOL_VERSION",
-    "BlockCheck",
     "BlockingSerialSocket",
     "Connected",
     "ConnectionAborted",
     "ConnectionClosed",
     "ConnectionRequested",
     "DialError",
-    "Encoding",
     "EndOfStream",
     "Endpoint",
     "EndpointConfig",
     "EndpointStatistics",
     "Event",
-    "FileCompleted",
-    "FileData",
-    "FileStarted",
-    "InitParameters",
-    "KermitConfig",
-    "KermitEvent",
-    "KermitReceiver",
-    "KermitSender",
-    "KermitState",
-    "KermitStatistics",
-    "KermitTransferError",
     "LineBusy",
     "LineFailed",
     "LinkBroken",
@@ -155,45 +101,26 @@ __all__ = [
     "ModemConnection",
     "ModemError",
     "ModemTimeout",
-    "Negotiated",
     "NoAnswer",
     "NoCarrier",
     "NoDialtone",
-    "OutgoingFile",
-    "Packet",
-    "PacketParser",
-    "PacketReceived",
-    "PacketRejected",
-    "PacketType",
-    "ParserEvent",
-    "ParserStatistics",
     "PeerAborted",
     "PortStatistics",
     "ProtocolError",
-    "RejectReason",
     "RemoteProtocolError",
     "SerialListener",
     "SerialPort",
     "SerialSocket",
     "SocketStatistics",
     "State",
-    "TransferComplete",
-    "TransferFailed",
     "accept",
     "answer",
-    "build_packet",
-    "check_chars",
     "connect",
-    "crc16_kermit",
-    "data_capacity",
     "dial",
     "hangup",
-    "kermit_receive",
-    "kermit_send",
     "listen",
     "open_port",
     "open_pty_pair",
     "open_serial_socket",
-    "packet_length",
     "serve",
 ]

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import serial
 
 from ._config import MAX_WINDOW, MIN_ENDPOINT_PACKET_LENGTH
-from ._kermit_params import MAX_KERMIT_WINDOW
 from ._wire import MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, SEQ_MODULUS
+from .kermit import MAX_KERMIT_WINDOW
 
 __all__ = [
     "BAUD",

@@ -19,10 +19,8 @@ import trio
 from ._checks import BlockCheck
 from ._cliargs import BAUD, KERMIT_LENGTH, KERMIT_TIMEOUT, KERMIT_WINDOW, RETRIES, SERIAL_PORT
 from ._errors import LocalProtocolError
-from ._kermit import KermitStatistics
-from ._kermit_io import KermitTransferError, kermit_receive, kermit_send
-from ._kermit_params import KermitConfig
 from ._port import open_port
+from .kermit import KermitConfig, KermitStatistics, KermitTransferError, kermit_receive, kermit_send
 
 __all__ = ["add_arguments", "kermit_main"]
 

@@ -46,7 +46,7 @@ class Packet:
             (a ``StrEnum``, so ``packet.type == "D"`` works); unknown printable
             letters from a peer are kept as plain one-character strings.
         data: the data field exactly as on the wire, i.e. prefix-encoded.  Use
-            :class:`~serialsocket.Encoding` to encode and decode it.
+            :class:`~serialsocket.packets.Encoding` to encode and decode it.
 
     Raises:
         LocalProtocolError: ``seq`` is out of range, ``type`` is not one

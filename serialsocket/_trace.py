@@ -1,7 +1,7 @@
 """A packet trace: a port wrapper that logs every packet in both directions, decoded.
 
 :class:`TracingStream` wraps the port under a serial socket and runs a
-private :class:`~serialsocket.PacketParser` over each direction's bytes.
+private :class:`~serialsocket.packets.PacketParser` over each direction's bytes.
 Every packet (and every rejected chunk) becomes one DEBUG record on the
 ``serialsocket.trace`` logger, e.g.::
 

@@ -21,11 +21,6 @@ SANS_IO = [
     "_endpoint",
     "_errors",
     "_events",
-    "_kermit",
-    "_kermit_params",
-    "_kermit_receiver",
-    "_kermit_sender",
-    "_kermit_window",
     "_packet",
     "_params",
     "_parser",
@@ -34,6 +29,11 @@ SANS_IO = [
     "_sender",
     "_state",
     "_wire",
+    "kermit/_core",
+    "kermit/_params",
+    "kermit/_receiver",
+    "kermit/_sender",
+    "kermit/_window",
 ]
 FORBIDDEN_IN_CORE = {
     "trio",
@@ -75,47 +75,26 @@ def test_import_direction(package: str, forbidden: set[str]) -> None:
 
 
 def test_public_names_are_pinned() -> None:
+    from serialsocket import kermit, packets  # the two public submodules
+
     assert sorted(serialsocket.__all__) == sorted(
         [
-            "DEFAULT_MAX_PACKET_LENGTH",
-            "EIGHT_BIT_CLEAN",
-            "MAX_PACKET_LENGTH",
             "MAX_WINDOW",
-            "MIN_PACKET_LENGTH",
-            "PRINTABLE",
-            "PROTOCOL_VERSION",
-            "BlockCheck",
             "Connected",
             "ConnectionAborted",
             "ConnectionClosed",
             "ConnectionRequested",
-            "Encoding",
             "EndOfStream",
             "Endpoint",
             "EndpointConfig",
             "EndpointStatistics",
             "Event",
-            "InitParameters",
             "LinkDead",
             "LocalProtocolError",
             "MalformedDataError",
-            "Negotiated",
-            "Packet",
-            "PacketParser",
-            "PacketReceived",
-            "PacketRejected",
-            "PacketType",
-            "ParserEvent",
-            "ParserStatistics",
             "ProtocolError",
-            "RejectReason",
             "RemoteProtocolError",
             "State",
-            "build_packet",
-            "check_chars",
-            "crc16_kermit",
-            "data_capacity",
-            "packet_length",
             "LineFailed",
             "LinkBroken",
             "LinkDeadError",
@@ -145,7 +124,38 @@ def test_public_names_are_pinned() -> None:
             "dial",
             "hangup",
             "BlockingSerialSocket",
-            # Kermit file transfer
+        ]
+    )
+    assert sorted(packets.__all__) == sorted(
+        [
+            "DEFAULT_MAX_PACKET_LENGTH",
+            "EIGHT_BIT_CLEAN",
+            "MAX_PACKET_LENGTH",
+            "MIN_PACKET_LENGTH",
+            "PRINTABLE",
+            "PROTOCOL_VERSION",
+            "BlockCheck",
+            "Encoding",
+            "InitParameters",
+            "Negotiated",
+            "Packet",
+            "PacketParser",
+            "PacketReceived",
+            "PacketRejected",
+            "PacketType",
+            "ParserEvent",
+            "ParserStatistics",
+            "RejectReason",
+            "build_packet",
+            "check_chars",
+            "crc16_kermit",
+            "data_capacity",
+            "packet_length",
+        ]
+    )
+    assert sorted(kermit.__all__) == sorted(
+        [
+            "MAX_KERMIT_WINDOW",
             "FileCompleted",
             "FileData",
             "FileStarted",
@@ -163,8 +173,9 @@ def test_public_names_are_pinned() -> None:
             "kermit_send",
         ]
     )
-    for name in serialsocket.__all__:
-        assert getattr(serialsocket, name) is not None
+    for face in (serialsocket, packets, kermit):
+        for name in face.__all__:
+            assert getattr(face, name) is not None
 
 
 def test_protocol_error_is_abstract() -> None:

@@ -19,16 +19,13 @@ from collections.abc import Callable
 
 import pytest
 
-from serialsocket import (
+from serialsocket import ConnectionAborted, Endpoint, EndpointConfig, State
+from serialsocket.packets import (
     BlockCheck,
-    ConnectionAborted,
-    Endpoint,
-    EndpointConfig,
     InitParameters,
     Packet,
     PacketParser,
     PacketReceived,
-    State,
     build_packet,
 )
 

@@ -28,7 +28,7 @@ from linksim.cli import _main as linksim_cli
 from serialsocket import EndpointConfig
 from serialsocket import _cli as serial_cli
 from serialsocket import _cliargs as serial_args
-from serialsocket._kermit_params import KermitConfig
+from serialsocket.kermit import KermitConfig
 from tcpstream import _cli as tcp_cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

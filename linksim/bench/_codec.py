@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 from functools import partial
 
-from serialsocket import (
+from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
     BlockCheck,

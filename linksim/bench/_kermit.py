@@ -31,7 +31,8 @@ from dataclasses import dataclass, replace
 import trio
 
 from linksim.link import DirectionConfig, LinkConfig, run_relay
-from serialsocket import KermitConfig, KermitStatistics, kermit_receive, kermit_send, open_port
+from serialsocket import open_port
+from serialsocket.kermit import KermitConfig, KermitStatistics, kermit_receive, kermit_send
 
 __all__ = [
     "DEFAULT_PAIRS",

@@ -31,17 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from linksim.link import DirectionConfig, GilbertElliott, LinkConfig, LinkDirection
-from serialsocket import (
+from serialsocket import ConnectionAborted, Endpoint, EndpointConfig, LinkDead, State
+from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
     BlockCheck,
-    ConnectionAborted,
     Encoding,
-    Endpoint,
-    EndpointConfig,
-    LinkDead,
     Packet,
-    State,
     build_packet,
     data_capacity,
 )

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import serial
 
 from linksim.arm import DEFAULT_WORLD, WorldConfig
-from serialsocket import MAX_PACKET_LENGTH, MAX_WINDOW
+from serialsocket import MAX_WINDOW
+from serialsocket.packets import MAX_PACKET_LENGTH
 from tcpstream import load_key_file
 
 __all__ = [

@@ -43,7 +43,7 @@ from linksim.bench import (
     standard_grid,
     summarize,
 )
-from serialsocket import DEFAULT_MAX_PACKET_LENGTH
+from serialsocket.packets import DEFAULT_MAX_PACKET_LENGTH
 
 from ._args import (
     BAUD,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from serialsocket import EIGHT_BIT_CLEAN, PRINTABLE, BlockCheck, Encoding
+from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, BlockCheck, Encoding
 
 # Payloads rich in the bytes that matter: controls, prefix characters, 8-bit, runs.
 interesting_bytes = st.sampled_from(

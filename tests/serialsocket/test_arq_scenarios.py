@@ -13,7 +13,6 @@ from __future__ import annotations
 import pytest
 
 from serialsocket import (
-    BlockCheck,
     Connected,
     ConnectionAborted,
     ConnectionClosed,
@@ -23,11 +22,9 @@ from serialsocket import (
     EndpointConfig,
     LinkDead,
     LocalProtocolError,
-    Packet,
-    PacketType,
     State,
-    build_packet,
 )
+from serialsocket.packets import BlockCheck, Packet, PacketType, build_packet
 
 from .simlink import SimLink, split_packets
 
@@ -188,7 +185,7 @@ def test_incompatible_peer_is_refused_with_a_reason() -> None:
 
 
 def test_seven_bit_line_refuses_a_peer_that_refuses_8th_bit_prefixing() -> None:
-    from serialsocket import EIGHT_BIT_CLEAN, InitParameters
+    from serialsocket.packets import EIGHT_BIT_CLEAN, InitParameters
 
     theirs = InitParameters.mine(
         max_packet_length=128,

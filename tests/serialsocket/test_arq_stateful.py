@@ -14,20 +14,17 @@ from hypothesis import strategies as st
 
 from fuzz.arq_machine import LINGER, LIVENESS_TIMEOUT, ARQMachine, payloads
 from serialsocket import (
-    EIGHT_BIT_CLEAN,
     MAX_WINDOW,
-    PRINTABLE,
     Connected,
     ConnectionClosed,
-    Encoding,
     EndOfStream,
     Endpoint,
     EndpointConfig,
     LocalProtocolError,
-    PacketType,
     State,
 )
 from serialsocket._config import MIN_ENDPOINT_PACKET_LENGTH
+from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, Encoding, PacketType
 from tests.serialsocket.simlink import Filter, SimLink, split_packets
 
 

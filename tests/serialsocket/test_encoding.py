@@ -6,14 +6,9 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from serialsocket import (
-    EIGHT_BIT_CLEAN,
-    PRINTABLE,
-    Encoding,
-    LocalProtocolError,
-    MalformedDataError,
-)
+from serialsocket import LocalProtocolError, MalformedDataError
 from serialsocket._encoding import MAX_TOKEN_LENGTH
+from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 
 from .strategies import encodings, payloads
 

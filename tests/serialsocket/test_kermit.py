@@ -14,24 +14,27 @@ import random
 import pytest
 import trio
 
-from serialsocket import BlockCheck, Packet, RemoteProtocolError, build_packet, open_pty_pair
+from serialsocket import LocalProtocolError, RemoteProtocolError, open_pty_pair
 from serialsocket._cli import main as cli_main
-from serialsocket._errors import LocalProtocolError
-from serialsocket._kermit import (
+from serialsocket.kermit import (
     FileCompleted,
     FileData,
     FileStarted,
+    KermitConfig,
     KermitEvent,
+    KermitReceiver,
+    KermitSender,
     KermitState,
     KermitStatistics,
     OutgoingFile,
     TransferComplete,
     TransferFailed,
+    kermit_receive,
+    kermit_send,
 )
-from serialsocket._kermit_io import kermit_receive, kermit_send, safe_file_name
-from serialsocket._kermit_params import KermitConfig, KermitInit, negotiate_kermit
-from serialsocket._kermit_receiver import KermitReceiver
-from serialsocket._kermit_sender import KermitSender
+from serialsocket.kermit._io import safe_file_name
+from serialsocket.kermit._params import KermitInit, negotiate_kermit
+from serialsocket.packets import BlockCheck, Packet, build_packet
 
 Side = KermitSender | KermitReceiver
 

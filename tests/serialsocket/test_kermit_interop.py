@@ -31,7 +31,7 @@ try:  # linksim's sub-package layout (being committed alongside)
     from linksim.bench._kermit import TransferSetup, available, run_transfer
 except ModuleNotFoundError:  # the flat layout before it
     from linksim._bench_kermit import TransferSetup, available, run_transfer  # type: ignore[no-redef]
-from serialsocket import KermitStatistics
+from serialsocket.kermit import KermitStatistics
 
 _REASON = {
     "ckermit": "ckermit not installed: .ci/run installs it (apt-get install ckermit); "

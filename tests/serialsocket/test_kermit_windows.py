@@ -19,12 +19,17 @@ import random
 import trio
 import trio.testing
 
-from serialsocket import BlockCheck, Packet, build_packet
-from serialsocket._kermit import FileCompleted, TransferComplete
-from serialsocket._kermit_io import KermitTransferError, kermit_receive, kermit_send
-from serialsocket._kermit_params import KermitConfig, KermitInit, negotiate_kermit
-from serialsocket._kermit_receiver import KermitReceiver
-from serialsocket._parser import PacketParser, PacketReceived
+from serialsocket.kermit import (
+    FileCompleted,
+    KermitConfig,
+    KermitReceiver,
+    KermitTransferError,
+    TransferComplete,
+    kermit_receive,
+    kermit_send,
+)
+from serialsocket.kermit._params import KermitInit, negotiate_kermit
+from serialsocket.packets import BlockCheck, Packet, PacketParser, PacketReceived, build_packet
 
 CONFIG = KermitConfig(window=8, max_packet_length=96, attributes=False, timeout=5.0, retry_limit=6)
 """Window 8, normal packets (about 90 file bytes per D), a fixed 5 s timeout."""

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from serialsocket import (
+from serialsocket import LocalProtocolError
+from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
     BlockCheck,
-    LocalProtocolError,
     Packet,
     PacketType,
     build_packet,

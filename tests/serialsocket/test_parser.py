@@ -8,10 +8,10 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from serialsocket import (
+from serialsocket import LocalProtocolError
+from serialsocket.packets import (
     PRINTABLE,
     BlockCheck,
-    LocalProtocolError,
     Packet,
     PacketParser,
     PacketReceived,

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ._packet import Packet
-from ._wire import SEQ_MODULUS
+from serialsocket._packet import Packet
+from serialsocket._wire import SEQ_MODULUS
 
 __all__ = ["ReceiveWindow", "SendSlot", "SendWindow"]
 

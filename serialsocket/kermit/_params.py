@@ -2,7 +2,7 @@
 
 The layout is the one in reference/kermit.md section 4 (and
 :mod:`serialsocket._params`, whose decoder walks the CAPAS/WINDO/MAXLX part for
-us).  :class:`~serialsocket.InitParameters` cannot be reused for *encoding*:
+us).  :class:`~serialsocket.packets.InitParameters` cannot be reused for *encoding*:
 it pins telelink's own SYSID and trailing fields and always offers long
 packets and windows, while a file-transfer peer must see exactly what we
 support (attributes, binary WHATAMI, long packets only when configured) and we
@@ -22,11 +22,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ._checks import BlockCheck
-from ._encoding import Encoding
-from ._errors import LocalProtocolError, RemoteProtocolError
-from ._params import InitParameters
-from ._wire import MAX_NORMAL_LEN, MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
+from serialsocket._checks import BlockCheck
+from serialsocket._encoding import Encoding
+from serialsocket._errors import LocalProtocolError, RemoteProtocolError
+from serialsocket._params import InitParameters
+from serialsocket._wire import (
+    MAX_NORMAL_LEN,
+    MAX_PACKET_LENGTH,
+    MIN_PACKET_LENGTH,
+    ctl,
+    tochar,
+    unchar,
+)
 
 __all__ = ["KermitConfig", "KermitInit", "KermitNegotiated", "negotiate_kermit"]
 

@@ -1,7 +1,7 @@
-"""Kermit file transfer, sans-I/O: the sender (see :mod:`serialsocket._kermit`).
+"""Kermit file transfer, sans-I/O: the sender (see :mod:`serialsocket.kermit._core`).
 
 The states, their transition table, the events and the shared machinery
-are in :mod:`serialsocket._kermit`; this module is the sending role.
+are in :mod:`serialsocket.kermit._core`; this module is the sending role.
 """
 
 from __future__ import annotations
@@ -12,7 +12,10 @@ from collections import deque
 from collections.abc import Sequence
 from pathlib import PurePosixPath
 
-from ._kermit import (
+from serialsocket._packet import Packet, data_capacity
+from serialsocket._wire import SEQ_MODULUS, PacketType
+
+from ._core import (
     _BREAK_RETRIES,
     _READ_AHEAD,
     FileCompleted,
@@ -22,10 +25,8 @@ from ._kermit import (
     OutgoingFile,
     TransferComplete,
 )
-from ._kermit_params import KermitConfig
-from ._kermit_window import SendSlot, SendWindow
-from ._packet import Packet, data_capacity
-from ._wire import SEQ_MODULUS, PacketType
+from ._params import KermitConfig
+from ._window import SendSlot, SendWindow
 
 log = logging.getLogger(__name__)
 

@@ -28,7 +28,7 @@ from typing import BinaryIO
 
 import trio
 
-from ._kermit import (
+from ._core import (
     FileCompleted,
     FileData,
     FileStarted,
@@ -38,9 +38,9 @@ from ._kermit import (
     TransferComplete,
     TransferFailed,
 )
-from ._kermit_params import KermitConfig
-from ._kermit_receiver import KermitReceiver
-from ._kermit_sender import KermitSender
+from ._params import KermitConfig
+from ._receiver import KermitReceiver
+from ._sender import KermitSender
 
 __all__ = ["KermitTransferError", "kermit_receive", "kermit_send", "safe_file_name"]
 

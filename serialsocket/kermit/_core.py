@@ -1,7 +1,7 @@
 """Kermit file transfer, sans-I/O: states, transition table, events, shared core.
 
-The two roles are :class:`~serialsocket.KermitSender` (``_kermit_sender.py``)
-and :class:`~serialsocket.KermitReceiver` (``_kermit_receiver.py``); both
+The two roles are :class:`~serialsocket.kermit.KermitSender` (``_sender.py``)
+and :class:`~serialsocket.kermit.KermitReceiver` (``_receiver.py``); both
 subclass :class:`KermitSide` below, and every state change of either goes
 through :data:`TRANSITIONS`.
 
@@ -55,13 +55,14 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Protocol
 
-from ._checks import BlockCheck
-from ._encoding import Encoding
-from ._errors import LocalProtocolError, MalformedDataError, RemoteProtocolError
-from ._kermit_params import KermitConfig, KermitInit, KermitNegotiated, negotiate_kermit
-from ._packet import Packet, build_packet
-from ._parser import PacketParser, PacketReceived
-from ._wire import CR, MAX_PACKET_LENGTH, PacketType
+from serialsocket._checks import BlockCheck
+from serialsocket._encoding import Encoding
+from serialsocket._errors import LocalProtocolError, MalformedDataError, RemoteProtocolError
+from serialsocket._packet import Packet, build_packet
+from serialsocket._parser import PacketParser, PacketReceived
+from serialsocket._wire import CR, MAX_PACKET_LENGTH, PacketType
+
+from ._params import KermitConfig, KermitInit, KermitNegotiated, negotiate_kermit
 
 __all__ = [
     "FileCompleted",
@@ -255,8 +256,8 @@ class KermitStatistics:
 class KermitSide(abc.ABC):
     """What both roles share: parser, output buffer, events, E packets, counters.
 
-    Not used directly: :class:`~serialsocket.KermitSender` (``_kermit_sender``)
-    and :class:`~serialsocket.KermitReceiver` (``_kermit_receiver``) subclass it.
+    Not used directly: :class:`~serialsocket.kermit.KermitSender` (``_sender``)
+    and :class:`~serialsocket.kermit.KermitReceiver` (``_receiver``) subclass it.
     """
 
     def __init__(self, config: KermitConfig, state: KermitState) -> None:

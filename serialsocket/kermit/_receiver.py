@@ -1,13 +1,16 @@
-"""Kermit file transfer, sans-I/O: the receiver (see :mod:`serialsocket._kermit`).
+"""Kermit file transfer, sans-I/O: the receiver (see :mod:`serialsocket.kermit._core`).
 
 The states, their transition table, the events and the shared machinery
-are in :mod:`serialsocket._kermit`; this module is the receiving role.
+are in :mod:`serialsocket.kermit._core`; this module is the receiving role.
 """
 
 from __future__ import annotations
 
-from ._errors import RemoteProtocolError
-from ._kermit import (
+from serialsocket._errors import RemoteProtocolError
+from serialsocket._packet import Packet
+from serialsocket._wire import SEQ_MODULUS, PacketType
+
+from ._core import (
     FileCompleted,
     FileData,
     FileStarted,
@@ -15,10 +18,8 @@ from ._kermit import (
     KermitState,
     TransferComplete,
 )
-from ._kermit_params import KermitConfig
-from ._kermit_window import ReceiveWindow
-from ._packet import Packet
-from ._wire import SEQ_MODULUS, PacketType
+from ._params import KermitConfig
+from ._window import ReceiveWindow
 
 __all__ = ["KermitReceiver"]
 
