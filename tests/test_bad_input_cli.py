@@ -531,9 +531,21 @@ RUNTIME_CASES = [
     (["linksim", "demo", "--transport", "tcp", "--max-len", "90"], 2, "tcp transport has", False),
     (["linksim", "relay", "--device", "/dev/null"], 1, "give exactly two devices", False),
     (
-        ["linksim", "relay", "--device", "socket://localhost:1", "--device", "/dev/ptmx"],
+        ["linksim", "relay", "--device", "loop://", "--device", "/dev/ptmx"],
         1,
-        "socket://localhost:1 is a URL",
+        "loop://: the relay attaches to ttys by path, or to a TCP serial server",
+        False,
+    ),
+    (
+        ["linksim", "relay", "--device", "socket://nohost", "--device", "/dev/ptmx"],
+        1,
+        "a TCP serial server is socket://HOST:PORT",
+        False,
+    ),
+    (
+        ["linksim", "relay", "--device", "socket://127.0.0.1:1", "--device", "/dev/ptmx"],
+        1,
+        "Connection refused",
         False,
     ),
     (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/null"], 1, "both", False),

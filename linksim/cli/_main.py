@@ -19,7 +19,7 @@ from linksim._errors import ConfigError
 from linksim.link import CallOutcome, ModemConfig, ModemPair, RelayStatistics, run_relay
 from tcpstream import write_key_file
 
-from . import _armserver, _bench, _console, _demo, _soak
+from . import _armserver, _bench, _console, _demo, _proxy, _soak
 from ._args import SECONDS, SECONDS_OR_ZERO, SERIAL_PORT, write_template
 from ._link import add_link_arguments, config_from_args
 
@@ -238,6 +238,15 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="joint trajectories of a console --log file (PNG)")
     _console.add_plot_arguments(plot)
     plot.set_defaults(func=_console.plot_main)
+    proxy = sub.add_parser(
+        "proxy",
+        help="a real TCP proxy with the line's rate, delay, stalls, outages and cuts",
+        description="Carry TCP connections through an impaired line in real time: rate, "
+        "delay and jitter as configured; loss, errors and bursts as TCP would see them "
+        "(a stall of one retransmission timeout); outages; resets at byte offsets.",
+    )
+    _proxy.add_proxy_arguments(proxy)
+    proxy.set_defaults(func=_proxy.proxy_main)
     keygen = sub.add_parser(
         "keygen",
         help="write a new pre-shared key file (mode 0600) for --key-file",

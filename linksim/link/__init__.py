@@ -5,6 +5,8 @@
 * :func:`open_impaired_link`: two connected trio streams over an impaired line;
   :func:`serial_socket_pair`: two connected serial sockets over one.
 * :func:`run_relay`: the same line between two real ptys (``linksim relay``);
+  :func:`run_proxy`: the line in front of a real TCP server (``linksim proxy``,
+  :class:`TcpDirection` its timing model, :class:`Cut` a reset at a byte offset);
   :class:`ModemPair`: two emulated Hayes modems joined by the line.
 * :func:`run_virtual`: a virtual-time run that is the same run every time.
 * The stack fitted to a line: :func:`endpoint_config_for`,
@@ -35,6 +37,7 @@ from ._modem import (
     ModemStateError,
 )
 from ._pair import serial_socket_pair
+from ._proxy import Cut, ProxyStatistics, TcpDirection, run_proxy
 from ._relay import RelayStatistics, run_relay
 from ._tuning import endpoint_config_for, endpoint_overrides, rtt_hint_for, server_config_for
 from ._virtual import run_virtual
@@ -44,6 +47,7 @@ __all__ = [
     "TRANSITIONS",
     "CallOutcome",
     "ConfigError",
+    "Cut",
     "DirectionConfig",
     "DirectionStatistics",
     "FaultAction",
@@ -58,12 +62,15 @@ __all__ = [
     "ModemState",
     "ModemStateError",
     "Outage",
+    "ProxyStatistics",
     "RelayStatistics",
     "ScriptedFault",
+    "TcpDirection",
     "endpoint_config_for",
     "endpoint_overrides",
     "open_impaired_link",
     "rtt_hint_for",
+    "run_proxy",
     "run_relay",
     "run_virtual",
     "serial_socket_pair",

@@ -2,11 +2,13 @@
 
 By default the relay creates two pty pairs, sets both to raw mode and hands out
 the slave paths; the user's programs open those (``minicom -p /dev/pts/5``,
-``kermit -l /dev/pts/6``, or our own CLI).  Bytes written on one side pass
-through the :class:`~linksim.LinkDirection` of that direction and come out on
-the other side at their modelled arrival time.  With ``devices`` it attaches to
-existing ttys instead.  With a :class:`~linksim.ModemPair`, each side talks to
-an emulated Hayes modem first.
+``kermit -l /dev/pts/6``, or our own CLI).  A device may also be a TCP serial
+server, ``socket://HOST:PORT`` (ser2net style): the relay connects to it and
+treats the connection as that side's port; the server closing it ends the run.
+Bytes written on one side pass through the :class:`~linksim.LinkDirection` of
+that direction and come out on the other side at their modelled arrival time.
+With ``devices`` it attaches to existing ttys instead.  With a
+:class:`~linksim.ModemPair`, each side talks to an emulated Hayes modem first.
 
 Flow control is by back-pressure, never by loss: a side is not read while its
 direction's UART backlog holds ``tx_buffer`` bytes (so a writer is paced by the
@@ -23,6 +25,7 @@ import errno
 import math
 import os
 import select
+import socket
 import tty
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -55,12 +58,18 @@ class RelayStatistics:
     b_to_a: DirectionStatistics
 
 
+class _StreamEnded(Exception):
+    """A TCP serial server closed its connection (the relay ends once the line is empty)."""
+
+
 class _Port:
     """One side's tty: the fd we read and write, and the path users open."""
 
-    def __init__(self, fd: int, path: str) -> None:
+    def __init__(self, fd: int, path: str, *, stream: bool = False) -> None:
         self.fd = fd
         self.path = path
+        self.stream = stream
+        """A TCP connection, not a tty: its end (EOF, reset) is final."""
         self.out = bytearray()  # waiting to be written to this tty
         self.out_ready = trio.Event()
         self.drained = trio.Event()
@@ -98,6 +107,8 @@ class _Port:
                     chunks.append(more)
                     total += len(more)
                 return b"".join(chunks)
+            if self.stream:
+                raise _StreamEnded(f"{self.path}: the server closed the connection")
             await trio.sleep(_HUP_POLL)  # EOF on a device: nothing to read yet
 
     async def write_all(self) -> None:
@@ -120,16 +131,27 @@ class _Port:
             self.drained.set()
 
 
+def _socket_address(url: str) -> tuple[str, int]:
+    """``socket://HOST:PORT`` as an address; ValueError saying what is wrong."""
+    host, sep, port = url.removeprefix("socket://").partition("?")[0].rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"{url}: a TCP serial server is socket://HOST:PORT")
+    return host.strip("[]"), int(port)
+
+
 def _check_devices(devices: Sequence[str]) -> None:
     """Refuse device lists the relay cannot carry, before opening anything."""
     if len(devices) != 2:
         raise ValueError(f"give exactly two devices (--device A --device B), not {len(devices)}")
     for path in devices:
-        if "://" in path:
+        if "://" in path and not path.startswith("socket://"):
             raise ValueError(
-                f"{path} is a URL: the relay attaches to two tty devices by path "
-                "(pyserial URLs are for the serialsocket and arm-server ports)"
+                f"{path}: the relay attaches to ttys by path, or to a TCP serial server "
+                "as socket://HOST:PORT (other pyserial URLs are for the serialsocket and "
+                "arm-server ports)"
             )
+        if path.startswith("socket://"):
+            _socket_address(path)  # refuse a malformed one before opening anything
     if os.path.realpath(devices[0]) == os.path.realpath(devices[1]):
         raise ValueError(f"both devices are {devices[0]}: give two different ttys")
 
@@ -142,6 +164,14 @@ def _open_ports(devices: Sequence[str] | None) -> tuple[list[_Port], list[int]]:
         if devices:
             _check_devices(devices)
             for path in devices:
+                if path.startswith("socket://"):
+                    # A TCP serial server (ser2net style): the socket is the port.
+                    sock = socket.create_connection(_socket_address(path), timeout=10)
+                    sock.setblocking(False)
+                    fd = sock.detach()
+                    fds.append(fd)
+                    ports.append(_Port(fd, path, stream=True))
+                    continue
                 fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
                 fds.append(fd)
                 if not os.isatty(fd):
@@ -249,7 +279,14 @@ class _Relay:
                 blocked = far if len(far.out) >= self.out_buffer else port
                 blocked.drained = trio.Event()
                 await blocked.drained.wait()
-            data = await port.read()
+            try:
+                data = await port.read()
+            except _StreamEnded as ended:
+                # What the server sent before it closed is still on the line:
+                # deliver it, then end the run.
+                while engine.statistics().bytes_in_flight or far.out:
+                    await trio.sleep(_HUP_POLL)
+                raise ConnectionError(str(ended)) from None
             now = self.now()
             if self.modems is None:
                 engine.send(data, now)

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+import tty
 from collections.abc import Awaitable, Callable
 
 import pytest
@@ -196,3 +197,54 @@ def test_cli_relay_rejects_bad_values() -> None:
     )
     assert out.returncode == 2
     assert "argument --loss: must be a number in [0, 1], got '1.5'" in out.stderr
+
+
+def test_a_tcp_serial_server_is_a_device() -> None:
+    """``--device socket://HOST:PORT`` (ser2net style): bytes from a pty reach the
+    TCP server through the line and its answers come back; the server closing
+    the connection ends the relay with the reason."""
+    outcome: dict[str, object] = {}
+
+    async def main() -> None:
+        with trio.fail_after(60):
+            async with trio.open_nursery() as nursery:
+
+                async def echo_once(stream: trio.SocketStream) -> None:
+                    async with stream:
+                        data = await stream.receive_some()
+                        await stream.send_all(data.upper())
+                    # closing: the relay's run ends
+
+                listeners = await nursery.start(trio.serve_tcp, echo_once, 0)
+                port = listeners[0].socket.getsockname()[1]
+                master_fd, slave_fd = os.openpty()
+                tty.setraw(slave_fd)
+                slave_path = os.ttyname(slave_fd)
+                master = trio.lowlevel.FdStream(master_fd)
+                async with master:
+                    relay_done = trio.Event()
+
+                    async def relay() -> None:
+                        try:
+                            await run_relay(
+                                LinkConfig.symmetric(DirectionConfig(delay=0.05)),
+                                devices=[f"socket://127.0.0.1:{port}", slave_path],
+                            )
+                        except* ConnectionError as group:
+                            outcome["ended"] = str(group.exceptions[0])
+                        relay_done.set()
+
+                    nursery.start_soon(relay)
+                    await trio.sleep(0.3)
+                    await master.send_all(b"hello arm")
+                    got = b""
+                    while len(got) < 9:
+                        got += await master.receive_some()
+                    outcome["answer"] = got
+                    await relay_done.wait()
+                os.close(slave_fd)
+                nursery.cancel_scope.cancel()
+
+    trio.run(main)
+    assert outcome["answer"] == b"HELLO ARM"
+    assert "the server closed the connection" in str(outcome["ended"])
