@@ -1,11 +1,11 @@
 """atheris harness: the tcpstream command-packet decoder.
 
 Input: the first byte picks a shape -- raw bytes of any length, or exactly
-:data:`~tcpstream.PACKET_SIZE` bytes with a correct magic and version so the
+:data:`~tcpstream.commands.PACKET_SIZE` bytes with a correct magic and version so the
 fuzzer spends its time in the field checks.  Properties (any violation raises):
 
-* :func:`~tcpstream.decode_packet` either returns a :class:`~tcpstream.Packet`
-  or raises a :class:`~tcpstream.PacketError` subclass carrying a
+* :func:`~tcpstream.commands.decode_packet` either returns a :class:`~tcpstream.commands.Packet`
+  or raises a :class:`~tcpstream.commands.PacketError` subclass carrying a
   ``FailureReason`` (never ``struct.error``, ``ValueError`` or the like);
 * a decoded packet re-encodes to exactly the input bytes (nothing the decoder
   accepts is ambiguous), its words are finite, and ``describe()`` works;
@@ -21,22 +21,19 @@ import sys
 from fuzz._instrument import instrumented
 
 with instrumented(__name__ == "__main__"):
-    from tcpstream import (
+    from tcpstream import Command, CommandCode, CommandFailed, FailureReason
+    from tcpstream.commands import (
         MAGIC,
+        NUMERIC_KINDS,
         PACKET_SIZE,
         PROTOCOL_VERSION,
-        Command,
-        CommandCode,
-        CommandFailed,
         CommandFlags,
-        FailureReason,
         PacketError,
         PacketKind,
         decode_packet,
         encode_packet,
         validate_arguments,
     )
-    from tcpstream._packet import NUMERIC_KINDS
 
 
 def one_input(data: bytes) -> None:

@@ -27,20 +27,22 @@ from fuzz._instrument import instrumented
 from fuzz._reader import Reader
 
 with instrumented(__name__ == "__main__"):
-    from tcpstream import (
+    from tcpstream.commands import (
         PACKET_SIZE,
+        Packet,
+        PacketKind,
+        encode_packet,
+        validate_arguments,
+    )
+    from tcpstream.connection import (
         ClientConnection,
         CommandReceived,
         ControllerIdentity,
         ControlRequested,
         Granted,
-        Packet,
-        PacketKind,
         ServerConnection,
         SessionParameters,
         SessionState,
-        encode_packet,
-        validate_arguments,
     )
 
 KEY = b"fuzz-harness-right-key-0123456789"

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from fuzz._atheris import CORPUS
 from serialsocket.packets import BlockCheck, Packet, build_packet
-from tcpstream import Packet as CommandPacket
-from tcpstream import PacketKind, commands, encode_packet
-from tcpstream._packet import words_body
+from tcpstream import commands
+from tcpstream.commands import Packet as CommandPacket
+from tcpstream.commands import PacketKind, encode_packet, words_body
 
 
 def _seeds() -> dict[str, dict[str, bytes]]:

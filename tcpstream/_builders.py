@@ -2,7 +2,7 @@
 
 Shared by the async client and the blocking facade, so both check arity the
 same way before anything crosses the link.  Every function returns a
-:class:`~tcpstream.Command`; :func:`~tcpstream.validate_arguments` then checks ranges.
+:class:`~tcpstream.Command`; :func:`~tcpstream.commands.validate_arguments` then checks ranges.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Exactly-once memory: what the arm remembers about each controller's request ids.
 
-PROTOCOL.md section 9.  The key is the :class:`~tcpstream.ControllerIdentity`
+PROTOCOL.md section 9.  The key is the :class:`~tcpstream.connection.ControllerIdentity`
 (name and incarnation).  A client numbers its commands 1, 2, 3, ... and never
 reuses a number within an incarnation, so for each identity the arm keeps:
 

@@ -11,7 +11,7 @@ dashboards)::
         result = await handle.completed()
 
 Like aioquic's ``asyncio/`` beside its ``quic/`` core, this module is only an
-adapter: the session is the sans-I/O :class:`~tcpstream.ClientConnection`
+adapter: the session is the sans-I/O :class:`~tcpstream.connection.ClientConnection`
 (handshake, authentication, counters, heartbeats, the dead time) and the
 exactly-once bookkeeping is the sans-I/O ``RequestBook`` the trio
 :class:`~tcpstream.ArmClient` uses too (request ids, the failure barrier,

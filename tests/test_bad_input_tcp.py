@@ -22,28 +22,26 @@ import trio
 import trio.testing
 
 from tcpstream import (
-    MAX_BAD_IN_A_ROW,
-    PACKET_SIZE,
-    ClientConnection,
     CloseReason,
     Command,
     CommandCode,
+    FailureReason,
+    Server,
+    ServerConfig,
+    commands,
+)
+from tcpstream._pump import CLOSE_TIMEOUT
+from tcpstream.commands import PACKET_SIZE, Packet, PacketKind, decode_packet, encode_packet
+from tcpstream.connection import (
+    MAX_BAD_IN_A_ROW,
+    ClientConnection,
     ControllerIdentity,
     Event,
     Failed,
-    FailureReason,
     Granted,
-    Packet,
-    PacketKind,
     RefusalReceived,
-    Server,
-    ServerConfig,
     SessionEnded,
-    commands,
-    decode_packet,
-    encode_packet,
 )
-from tcpstream._pump import CLOSE_TIMEOUT
 
 from .tcpstream.fakearm import FakeArm
 from .tcpstream.harness import KEY, run

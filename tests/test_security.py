@@ -34,25 +34,25 @@ import trio
 import trio.testing
 
 from tcpstream import (
-    PACKET_SIZE,
     ArmClient,
     AuthenticationFailed,
-    ClientConnection,
     CommandCode,
+    Refused,
+    Server,
+    ServerConfig,
+    commands,
+    connect_tcp,
+    serve_tcp,
+)
+from tcpstream.commands import PACKET_SIZE, PacketKind, decode_packet
+from tcpstream.connection import (
+    ClientConnection,
     Completed,
     ControllerIdentity,
     Failed,
     Granted,
-    PacketKind,
-    Refused,
-    Server,
-    ServerConfig,
     SessionEnded,
     SessionState,
-    commands,
-    connect_tcp,
-    decode_packet,
-    serve_tcp,
 )
 
 from .tcpstream.fakearm import FakeArm

@@ -30,16 +30,8 @@ import numpy as np
 import trio
 
 from linksim._errors import ConfigError
-from tcpstream import (
-    Command,
-    CommandCode,
-    CommandFailed,
-    CommandFlags,
-    CommandResult,
-    FailureReason,
-    Feedback,
-    validate_arguments,
-)
+from tcpstream import Command, CommandCode, CommandFailed, CommandResult, FailureReason, Feedback
+from tcpstream.commands import CommandFlags, validate_arguments
 
 from ._collision import Load, first_collision
 from ._kinematics import PUMA560, ArmModel, Array, check_limits, frame_from_psa, hand_frame, psa

@@ -26,7 +26,8 @@ from typing import Any
 
 import trio
 
-from tcpstream import ClientConnection, Completed, ControllerIdentity, SessionState, commands
+from tcpstream import commands
+from tcpstream.connection import ClientConnection, Completed, ControllerIdentity, SessionState
 
 __all__ = ["run"]
 

@@ -30,7 +30,6 @@ import trio
 
 import serialsocket
 from tcpstream import (
-    PACKET_SIZE,
     ArmClient,
     Command,
     CommandResult,
@@ -42,6 +41,7 @@ from tcpstream import (
     connect_tcp,
     serve_tcp,
 )
+from tcpstream.commands import PACKET_SIZE
 
 __all__ = ["TRANSPORTS", "InstantArm", "run"]
 

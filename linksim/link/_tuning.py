@@ -18,7 +18,8 @@ from __future__ import annotations
 from typing import Any
 
 from serialsocket import EndpointConfig
-from tcpstream import PACKET_SIZE, ServerConfig
+from tcpstream import ServerConfig
+from tcpstream.commands import PACKET_SIZE
 
 from ._config import LinkConfig
 

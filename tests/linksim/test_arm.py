@@ -24,15 +24,8 @@ from linksim.arm._kinematics import (
     singular_region,
 )
 from linksim.arm._trajectory import CHECKPOINTS, QUINTIC_PEAK_RATE
-from tcpstream._commands import (
-    Command,
-    CommandCode,
-    CommandFailed,
-    CommandFlags,
-    Executor,
-    FailureReason,
-    Feedback,
-)
+from tcpstream import Command, CommandCode, CommandFailed, Executor, FailureReason, Feedback
+from tcpstream.commands import CommandFlags
 
 HOME = np.array(DEFAULT_WORLD.initial_joints)
 EMPTY = WorldConfig(initial_joints=DEFAULT_WORLD.initial_joints)

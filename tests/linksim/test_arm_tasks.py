@@ -10,7 +10,7 @@ import trio.testing
 from linksim import DEFAULT_WORLD, SimulatedArm, rock_task
 from linksim.arm import hand_frame
 from linksim.arm._kinematics import frame_from_psa, inverse
-from tcpstream._commands import Command, CommandCode, CommandFailed, CommandResult, FailureReason
+from tcpstream import Command, CommandCode, CommandFailed, CommandResult, FailureReason
 
 
 def test_rock_task_moves_the_rock_into_the_bin_and_comes_home() -> None:

@@ -15,7 +15,7 @@ import trio.testing
 from linksim import DEFAULT_WORLD, ConfigError, SimulatedArm, WorldConfig
 from linksim.arm import ObjectSpec, ObstacleSpec
 from linksim.arm._world import MAX_OBSTACLES
-from tcpstream._commands import Command, CommandCode, CommandFailed, FailureReason
+from tcpstream import Command, CommandCode, CommandFailed, FailureReason
 
 HOME = DEFAULT_WORLD.initial_joints
 

@@ -13,7 +13,7 @@ import pytest
 
 from linksim import DEFAULT_WORLD, DemoOptions, LinkConfig, rock_task, run_demo
 from linksim.arm import ObjectSpec
-from tcpstream import PACKET_SIZE
+from tcpstream.commands import PACKET_SIZE
 
 LINKSIM = [sys.executable, "-m", "linksim"]
 N_COMMANDS = len(rock_task(DEFAULT_WORLD).commands)

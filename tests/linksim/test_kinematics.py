@@ -26,7 +26,7 @@ from linksim.arm._kinematics import (
     singularity_measures,
     wrap_to_limits,
 )
-from tcpstream._commands import CommandFailed, FailureReason
+from tcpstream import CommandFailed, FailureReason
 
 BARE = dataclasses.replace(PUMA560, tool_length=0.0)
 LO = PUMA560.lower_array

@@ -14,18 +14,9 @@ import random
 import pytest
 import trio
 
-from tcpstream import (
-    PACKET_SIZE,
-    ClientConnection,
-    CommandCode,
-    ControllerIdentity,
-    Refused,
-    RefuseReason,
-    Role,
-    Server,
-    ServerConfig,
-    connect_tcp,
-)
+from tcpstream import CommandCode, Refused, RefuseReason, Server, ServerConfig, connect_tcp
+from tcpstream.commands import PACKET_SIZE
+from tcpstream.connection import ClientConnection, ControllerIdentity, Role
 
 from .fakearm import FakeArm
 from .harness import run, trio_scheduler_rng, wired

@@ -7,35 +7,32 @@ import logging
 
 import pytest
 
-from tcpstream import (
-    MAX_BAD_IN_A_ROW,
+from tcpstream import CloseReason, CommandResult, FailureReason, Feedback, RefuseReason, commands
+from tcpstream.commands import (
     PACKET_SIZE,
+    Packet,
+    PacketKind,
+    decode_packet,
+    encode_packet,
+    words_body,
+)
+from tcpstream.connection import (
+    MAX_BAD_IN_A_ROW,
     ClientConnection,
-    CloseReason,
     CommandReceived,
-    CommandResult,
     ControllerIdentity,
     ControlRequested,
     Event,
     Failed,
-    FailureReason,
-    Feedback,
     Granted,
-    Packet,
-    PacketKind,
     PacketRejected,
     RefusalReceived,
-    RefuseReason,
     Role,
     ServerConnection,
     SessionEnded,
     SessionParameters,
     SessionState,
-    commands,
-    decode_packet,
-    encode_packet,
 )
-from tcpstream._packet import words_body
 
 from .harness import KEY
 

@@ -24,12 +24,10 @@ from tcpstream import (
     CommandResult,
     FailureReason,
     Feedback,
-    Packet,
-    PacketKind,
     Server,
     commands,
-    encode_packet,
 )
+from tcpstream.commands import Packet, PacketKind, encode_packet
 
 from .fakearm import FakeArm
 from .harness import run, wired

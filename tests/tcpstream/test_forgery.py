@@ -13,19 +13,15 @@ import dataclasses
 
 import pytest
 
-from tcpstream import (
+from tcpstream import CloseReason, CommandCode, commands
+from tcpstream.commands import Packet, PacketKind, encode_packet
+from tcpstream.connection import (
     ClientConnection,
-    CloseReason,
-    CommandCode,
     ControllerIdentity,
-    Packet,
-    PacketKind,
     Role,
     ServerConnection,
     SessionParameters,
     SessionState,
-    commands,
-    encode_packet,
 )
 
 KEY = b"0123456789abcdef-forgery"

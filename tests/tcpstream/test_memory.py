@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from tcpstream import CommandCode, ControllerIdentity, FailureReason
+from tcpstream import CommandCode, FailureReason
 from tcpstream._memory import Lookup, RequestMemory, StoredFailure
+from tcpstream.connection import ControllerIdentity
 
 A = ControllerIdentity("a", 1)
 B = ControllerIdentity("b", 1)

@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tcpstream import (
+from tcpstream import CommandCode, FailureReason
+from tcpstream.commands import (
+    NUMERIC_KINDS,
     PACKET_SIZE,
     BadField,
     BadMagic,
     BadVersion,
-    CommandCode,
-    FailureReason,
     NonFiniteWord,
     Packet,
     PacketError,
@@ -25,8 +25,10 @@ from tcpstream import (
     WrongSize,
     decode_packet,
     encode_packet,
+    pack_text,
+    unpack_text,
+    words_body,
 )
-from tcpstream._packet import NUMERIC_KINDS, pack_text, unpack_text, words_body
 
 FINITE = st.floats(allow_nan=False, allow_infinity=False)
 

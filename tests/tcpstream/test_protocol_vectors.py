@@ -8,7 +8,7 @@ import hmac
 import pathlib
 import struct
 
-from tcpstream import PACKET_SIZE, PacketKind, decode_packet
+from tcpstream.commands import PACKET_SIZE, PacketKind, decode_packet
 
 from .vectors import KEY, render, session_vectors
 

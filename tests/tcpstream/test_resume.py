@@ -11,28 +11,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tcpstream import (
-    PACKET_SIZE,
     ArmClient,
-    ClientConnection,
     CloseReason,
     Command,
     CommandCode,
     CommandFailed,
     CommandResult,
-    ControllerIdentity,
     FailureReason,
-    Packet,
-    PacketKind,
     Refused,
     RefuseReason,
     Server,
     ServerConfig,
     SessionClosed,
-    SessionState,
     commands,
-    decode_packet,
-    encode_packet,
 )
+from tcpstream.commands import PACKET_SIZE, Packet, PacketKind, decode_packet, encode_packet
+from tcpstream.connection import ClientConnection, ControllerIdentity, SessionState
 
 from .fakearm import FakeArm
 from .harness import Wiring, run, wired

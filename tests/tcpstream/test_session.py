@@ -8,27 +8,23 @@ import pytest
 import trio
 
 from tcpstream import (
-    PACKET_SIZE,
     ArmClient,
     AuthenticationFailed,
-    ClientConnection,
     Command,
     CommandCode,
     CommandFailed,
     CommandResult,
-    ControllerIdentity,
     FailureReason,
     Feedback,
     LocalProtocolError,
-    Packet,
-    PacketKind,
     Refused,
     RefuseReason,
     Server,
     ServerConfig,
     commands,
-    decode_packet,
 )
+from tcpstream.commands import PACKET_SIZE, Packet, PacketKind, decode_packet
+from tcpstream.connection import ClientConnection, ControllerIdentity
 
 from .fakearm import FakeArm
 from .harness import KEY, run, wired

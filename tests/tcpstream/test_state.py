@@ -6,32 +6,25 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tcpstream import (
-    PACKET_SIZE,
+from tcpstream import CloseReason, LocalProtocolError, RefuseReason, commands
+from tcpstream.commands import PACKET_SIZE, Packet, PacketKind, encode_packet, words_body
+from tcpstream.connection import (
     TRANSITIONS,
     ClientConnection,
-    CloseReason,
     CommandReceived,
     ControllerIdentity,
     ControlRequested,
     EmergencyStopRequested,
     Granted,
     IllegalTransition,
-    LocalProtocolError,
-    Packet,
-    PacketKind,
-    RefuseReason,
     Role,
     ServerConnection,
     SessionParameters,
     SessionState,
     Side,
     Trigger,
-    commands,
-    encode_packet,
+    transition,
 )
-from tcpstream._packet import words_body
-from tcpstream._state import transition
 
 PARAMS = SessionParameters(0.5, 3.0, 0.0, 1024)
 INITIAL = {Side.CLIENT: SessionState.IDLE, Side.SERVER: SessionState.AWAITING_HELLO}

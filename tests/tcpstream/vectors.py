@@ -17,18 +17,20 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from tcpstream import (
-    ClientConnection,
     CloseReason,
     CommandCode,
     CommandResult,
-    ControllerIdentity,
     FailureReason,
     Feedback,
     RefuseReason,
+    commands,
+)
+from tcpstream.connection import (
+    ClientConnection,
+    ControllerIdentity,
     Role,
     ServerConnection,
     SessionParameters,
-    commands,
 )
 
 KEY = b"telelink-test-vector-key-000001!"
