@@ -1,28 +1,18 @@
 """tcpstream: fixed-size manipulator command packets over any reliable byte stream.
 
-The socket stream of seed 003 section 9.1: a controlling agent connects, the
-manipulator grants or refuses, then fixed-size command packets flow both ways
-until the session closes and the manipulator listens again.  The wire format
-and the session are specified byte by byte in ``tcpstream/PROTOCOL.md``.
+Seed 003's socket stream (specified byte by byte in ``tcpstream/PROTOCOL.md``):
+a controller connects, the arm grants or refuses, then 216-byte command
+packets flow both ways until the session closes.
 
-* Controller side: :func:`connect_tcp`, :func:`connect_stream` (trio,
-  :class:`ArmClient`, :class:`CommandHandle`), :class:`BlockingClient` (for
-  code that is not async), :mod:`tcpstream.asyncio` (for asyncio); settings
-  in :class:`ClientConfig` / :class:`ClientOptions`.
-* Arm side: :func:`serve_tcp`, :func:`serve_stream`, :class:`Server` (calls an
-  :class:`Executor`: the simulated or real arm), :class:`ServerConfig`.
-* The command contract: :class:`Command`, :class:`CommandCode`,
-  :class:`CommandResult`, :class:`Feedback`, :class:`CommandFailed` with a
-  :class:`FailureReason`; builders (``move_to``, ``status``, ...) in
-  :mod:`tcpstream.commands`.
-* Errors: :class:`SessionError` (:class:`Refused`, :class:`AuthenticationFailed`,
-  :class:`SessionClosed`, :class:`OutcomeUnknown`), :class:`LocalProtocolError`.
-* Keys: :func:`generate_key`, :func:`load_key_file`, :func:`write_key_file`.
+Controller: :func:`connect_tcp` / :func:`connect_stream` give an
+:class:`ArmClient` (trio); :class:`BlockingClient` for code that is not async;
+:mod:`tcpstream.asyncio` for asyncio.  Arm: :func:`serve_tcp`,
+:func:`serve_stream`, :class:`Server`, which calls an :class:`Executor`.
 
-Public submodules: :mod:`tcpstream.commands` (the command set and the packet
-codec: everything another implementation of the wire protocol needs) and
-:mod:`tcpstream.connection` (the sans-I/O connection cores, their events and
-the session state table, for other event loops and tests).
+Public submodules: :mod:`tcpstream.commands` (builders such as ``move_to``,
+the command set and the packet codec: what another implementation of the
+wire protocol needs) and :mod:`tcpstream.connection` (the sans-I/O
+connection cores, their events and the session state table).
 """
 
 from importlib.metadata import PackageNotFoundError as _NotInstalled
