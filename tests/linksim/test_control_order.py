@@ -83,7 +83,13 @@ def test_the_final_pose_is_the_last_command_s_when_replies_arrive_together() -> 
     run = TaskRun(rock_task(DEFAULT_WORLD).commands)
     poses = {}
     for record in run.records:
-        pose = Feedback(joints=(record.index * 0.01, 0.0, 0.0, 0.0, 0.0, 0.0))
+        pose = Feedback(
+            joints=(record.index * 0.01, 0.0, 0.0, 0.0, 0.0, 0.0),
+            finger_opening=0.08,
+            p=(0.4, 0.0, 0.0),
+            s=(0.0, 1.0, 0.0),
+            a=(0.0, 0.0, -1.0),
+        )
         poses[record.index] = pose
         record.result = CommandResult(pose)
         record.done_at = 42.0  # all seen at the same moment
