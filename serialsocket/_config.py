@@ -18,7 +18,13 @@ from ._errors import LocalProtocolError
 from ._packet import data_capacity
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
-__all__ = ["MAX_WINDOW", "MIN_ENDPOINT_PACKET_LENGTH", "EndpointConfig"]
+__all__ = [
+    "MAX_WINDOW",
+    "MIN_CONNECT_TIMEOUT",
+    "MIN_ENDPOINT_PACKET_LENGTH",
+    "UNMEASURED_DEAD_AFTER",
+    "EndpointConfig",
+]
 
 MAX_WINDOW = 31
 """Largest window: sequence numbers are mod 64 and selective repeat needs the
@@ -35,6 +41,16 @@ _DERIVED_LENGTHS = (DEFAULT_MAX_PACKET_LENGTH, 256, 512, 1024, 2048)
 _UNKNOWN_RATE_SEND_BUFFER = 64 * 1024
 """Send buffer when the line rate is unknown: a fast line (pty, TCP tunnel)
 drains it in milliseconds, and large writes need few wake-ups."""
+
+MIN_CONNECT_TIMEOUT = 120.0
+"""Seconds the derived connect timeout is at least (hints or none); the init is
+resent with backoff meanwhile, so a silent port costs a few short packets."""
+
+UNMEASURED_DEAD_AFTER = 60.0
+"""Seconds of silence the derived ``dead_after`` allows before any round trip
+has been measured: the hints may be wrong or absent, and a verdict sized from
+them would end a healthy long link before its first answer arrives.  The
+first measured round trip replaces it (see ``Endpoint``)."""
 
 _ACK_WIRE = 10
 """Wire bytes of an ACK (MARK LEN SEQ TYPE + 2 data + 3 CRC + CR)."""
@@ -61,12 +77,14 @@ class EndpointConfig:
         check: block check asked for (CRC-16 by default).
         encoding: prefix profile; PRINTABLE asks for 8th-bit prefixing so the
             line carries only printable ASCII plus SOH and CR.
-        one_way_delay: the link's one-way propagation delay in seconds
-            (1.3 for the Earth-Moon path).  Sets the first timeout and the
-            floor under every later one.
-        line_rate: line rate in bits/s, or None when unknown or fast (a TCP
-            tunnel, a local pty).  Sets serialisation time, pacing and the
-            bandwidth-delay bound on the window.
+        one_way_delay: a hint: the link's one-way propagation delay in
+            seconds (1.3 for the Earth-Moon path), 0 when unknown.  Sets the
+            first timeout and the floor under every later one; the round
+            trip itself is measured (init exchange, then every ACK of a
+            packet sent once) and the timers follow the measurement.
+        line_rate: a hint: line rate in bits/s, or None when unknown or fast
+            (a TCP tunnel, a local pty).  Sets serialisation time, pacing and
+            the bandwidth-delay bound on the window.
         bits_per_char: bits per character on the line (8N1 = 10).
         receive_buffer: bytes of received data held for the application
             (in order, unread) plus out-of-order packets.  When full, the
@@ -76,10 +94,15 @@ class EndpointConfig:
             derives it (:meth:`derived_send_buffer`): what the line carries in
             one round trip when the rate is known, else 64 KiB.
         connect_timeout: give up connecting after this many seconds; None
-            derives it: 10 x the initial timeout.
+            derives it: 10 x the initial timeout, at least 120 s.  The
+            connection request is resent with backoff until then.
         dead_after: declare the link dead after this much silence while
             data or probes are outstanding; None derives it: 10 x the initial
-            timeout, at least 2 s.
+            timeout, at least 2 s.  It is a floor: once a round trip is
+            measured the endpoint waits at least two measured round trips
+            (an outage that long is ridden out) plus two retransmission
+            timeouts, and a derived value is at least 60 s until then, so a
+            hint that is too small never ends a healthy link.
         max_retries: per-packet retransmissions before aborting; None means
             unlimited (the right choice for long-delay links: liveness is then
             judged by ``dead_after``).
@@ -168,8 +191,10 @@ class EndpointConfig:
         return base + max(0.25 * base, 0.05)
 
     def derived_connect_timeout(self) -> float:
-        """``connect_timeout`` or its derived default."""
-        return self.connect_timeout or 10 * self.initial_timeout()
+        """``connect_timeout`` or its derived default: 10 initial timeouts, but at
+        least :data:`MIN_CONNECT_TIMEOUT` -- the hints may be missing or wrong,
+        and a peer a light-minute away cannot answer in half a second."""
+        return self.connect_timeout or max(10 * self.initial_timeout(), MIN_CONNECT_TIMEOUT)
 
     def derived_dead_after(self) -> float:
         """``dead_after`` or its derived default."""

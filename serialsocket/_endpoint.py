@@ -36,7 +36,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
-from ._config import EndpointConfig
+from ._config import UNMEASURED_DEAD_AFTER, EndpointConfig
 from ._encoding import PRINTABLE, Encoding
 from ._errors import LocalProtocolError, RemoteProtocolError
 from ._events import (
@@ -88,6 +88,10 @@ _DAMAGE = frozenset(
     }
 )
 _ERROR_TEXT_MAX = 80
+
+OUTAGE_ROUND_TRIPS = 2
+"""Once the round trip is measured, ``dead_after`` rides out an outage of this
+many measured round trips, plus two retransmission timeouts to repair it."""
 """E-packet reasons are cut to this many characters: one normal packet, readable in a trace."""
 
 
@@ -172,6 +176,8 @@ class Endpoint:
     _error_sent_at: float
     _init_sent_at: float
     _init_transmissions: int
+    _answer_sent_at: float
+    _answers: int
     _window_key: tuple[int, float | None, int] | None
     _window_cached: int
 
@@ -194,12 +200,7 @@ class Endpoint:
         )
         self._rtt = RttEstimator(
             floor=self._timeout_floor(self._max_length, self._max_length),
-            # Backoff stops at a minute (or 8 initial timeouts on slower paths),
-            # and at half of dead_after: then within any dead_after of silence
-            # a copy leaves with half of it to spare for its answer, so the
-            # verdict needs a copy that had ample time and still went
-            # unanswered, not merely a timer that outgrew the liveness clock.
-            ceiling=min(max(60.0, 8 * cfg.initial_timeout()), cfg.derived_dead_after() / 2),
+            ceiling=math.inf,  # set with dead_after when a connection starts (_ceiling)
             initial=cfg.initial_timeout(),
         )
         self._counters: dict[str, int] = dict.fromkeys(
@@ -540,7 +541,8 @@ class Endpoint:
         self._init_deadline = math.inf
         self._connect_deadline = math.inf
         self._linger_until = math.inf
-        self._dead_after = cfg.derived_dead_after()
+        self._dead_after = self._liveness()
+        self._rtt.ceiling = self._ceiling()
         self._close_deadline = math.inf
         self._close_patience = self._dead_after
         self._close_mark = (0, 0)
@@ -549,6 +551,8 @@ class Endpoint:
         self._error_sent_at = -math.inf
         self._init_sent_at = 0.0
         self._init_transmissions = 0
+        self._answer_sent_at = 0.0
+        self._answers = 0
         self._window_key = None
         self._window_cached = 1
 
@@ -578,6 +582,7 @@ class Endpoint:
                     send=False,
                 )
             else:
+                self._answers += 1  # a second answer: the seed would be ambiguous
                 self._answer_init()  # Our answer was lost; say it again.
             return
         if not allowed(st, Trigger.INIT_RECEIVED):
@@ -609,6 +614,7 @@ class Endpoint:
         if self._init_transmissions == 1:
             # The init went out once: its answer is a valid RTT sample (Karn).
             self._rtt.sample(now - self._init_sent_at)
+            self._measured()
         self._establish(agreed, now, answer=False)
 
     def _establish(self, agreed: Negotiated, now: float, *, answer: bool) -> None:
@@ -632,6 +638,8 @@ class Endpoint:
         self._last_heard = now
         self._init_deadline = math.inf
         if answer:
+            self._answer_sent_at = now
+            self._answers = 1
             self._answer_init()
         self._events.append(Connected(parameters=agreed))
 
@@ -686,6 +694,13 @@ class Endpoint:
                 self._error_sent_at = now
                 self._queue_error(self._abort_reason)
             return
+        if self._answers == 1 and self._state is State.ESTABLISHED and ptype != PacketType.INIT:
+            # The first packet the connector sent after our one answer: the
+            # round trip is at most this (the connector may have waited).
+            self._answers = 2
+            if self._rtt.srtt is None:
+                self._rtt.seed(now - self._answer_sent_at)
+                self._measured()
         if ptype == PacketType.INIT:
             self._on_init(packet, now)
         elif ptype == PacketType.ERROR:
@@ -716,8 +731,11 @@ class Endpoint:
         window = min(max(unchar(data[1]), 0), 31) if len(data) >= 2 else None
         before = set(self._sender.retransmit)
         acked = self._sender.packets_acked
-        for rtt in self._sender.on_ack(packet.seq, cum, window, now):
+        samples = self._sender.on_ack(packet.seq, cum, window, now)
+        for rtt in samples:
             self._rtt.sample(rtt)
+        if samples:
+            self._measured()
         if self._sender.packets_acked > acked:
             self._rtt.on_progress()
         if set(self._sender.retransmit) - before:
@@ -901,6 +919,35 @@ class Endpoint:
         if now >= self._next_probe_time():
             self._last_probe = now
             self._queue_ack(self._receiver.last_in_order(), poll=True)
+
+    def _liveness(self) -> float:
+        """``dead_after`` as the endpoint applies it (see :class:`EndpointConfig`).
+
+        The configured or derived value, raised while nothing is measured
+        (derived only: an explicit value is the user's) to
+        :data:`UNMEASURED_DEAD_AFTER`, and once the round trip is measured to
+        :data:`OUTAGE_ROUND_TRIPS` of it plus two retransmission timeouts."""
+        cfg = self.config
+        base = cfg.derived_dead_after()
+        srtt = self._rtt.srtt
+        if srtt is None:
+            return base if cfg.dead_after is not None else max(base, UNMEASURED_DEAD_AFTER)
+        return max(base, OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout())
+
+    def _ceiling(self) -> float:
+        """The most retransmission backoff may reach: a minute (or 8 initial
+        timeouts, or two measured timeouts, on slower paths), and at most half
+        of ``dead_after``: then within any ``dead_after`` of silence a copy
+        leaves with half of it to spare for its answer, so the verdict needs a
+        copy that had ample time and still went unanswered, not merely a timer
+        that outgrew the liveness clock."""
+        slow = max(60.0, 8 * self.config.initial_timeout(), 2 * self._rtt.base_timeout())
+        return min(slow, self._dead_after / 2)
+
+    def _measured(self) -> None:
+        """A round trip was measured: liveness and backoff follow the path, not the hints."""
+        self._dead_after = self._liveness()
+        self._rtt.ceiling = self._ceiling()
 
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue

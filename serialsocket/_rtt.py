@@ -37,6 +37,20 @@ class RttEstimator:
     backoff: int = 0
     samples: int = field(default=0)
 
+    def seed(self, upper_bound: float) -> None:
+        """Start the estimate from a round trip known only to be at most this.
+
+        For a side with no unambiguous sample yet (a listener, which sent no
+        init of its own): the time from its init answer to the connector's
+        first packet after it.  Too large rather than too small: a timeout
+        that is too long repairs a loss late; one that is too short resends
+        every packet.  Real samples then pull the estimate down (RFC 6298's
+        smoothing).  Does nothing once there is an estimate."""
+        if self.srtt is None:
+            self.srtt = max(upper_bound, 0.0)
+            self.rttvar = self.srtt / 2
+            self.backoff = 0
+
     def sample(self, rtt: float) -> None:
         """Feed one round-trip measurement (never from a retransmitted packet)."""
         rtt = max(rtt, 0.0)
@@ -57,8 +71,15 @@ class RttEstimator:
         timeout means a damaged packet, not congestion, and a backoff carried
         over to the next packet only delays its repair (and, stacked, outgrows
         ``dead_after``).  The estimate itself is untouched.
+
+        Before the first sample there is no estimate to fall back to: the
+        timeout is a guess (no hints: 50 ms), and dropping the backoff would
+        send every packet again before its ACK could arrive, forever.  So the
+        backoff stays until a packet sent once is acknowledged -- Karn's
+        algorithm as he gave it -- and then the estimate takes over.
         """
-        self.backoff = 0
+        if self.srtt is not None:
+            self.backoff = 0
 
     def on_timeout(self) -> None:
         """Double the timeout (up to the ceiling) after a retransmission timeout."""

@@ -44,8 +44,10 @@ from serialsocket.packets import (
 
 __all__ = [
     "BENCH_BURST",
+    "HINTS",
     "PROFILES",
     "Measurement",
+    "hinted",
     "limit_goodput",
     "packet_error_probability",
     "packet_sizes",
@@ -169,6 +171,35 @@ def limit_goodput(
     return rate / BITS_PER_CHAR * carried / wire * (1.0 - p_hit), p_hit
 
 
+HINTS = (
+    "exact",
+    "none",
+    "wrong-delay-low",
+    "wrong-delay-high",
+    "wrong-rate-low",
+    "wrong-rate-high",
+)
+"""What both ends are told about the line: the truth, nothing, or one value 10x off."""
+
+
+def hinted(hints: str, delay: float, rate: float) -> tuple[float, float | None]:
+    """The ``(one_way_delay, line_rate)`` the ends are given under ``hints``."""
+    match hints:
+        case "exact":
+            return delay, rate
+        case "none":
+            return 0.0, None
+        case "wrong-delay-low":
+            return delay / 10, rate
+        case "wrong-delay-high":
+            return delay * 10 if delay > 0 else 1.0, rate
+        case "wrong-rate-low":
+            return delay, rate / 10
+        case "wrong-rate-high":
+            return delay, rate * 10
+    raise ValueError(f"hints must be one of {', '.join(HINTS)}, got {hints!r}")
+
+
 def simulate(
     payload: bytes,
     *,
@@ -181,6 +212,7 @@ def simulate(
     encoding: Encoding,
     seed: int,
     time_cap: float,
+    hints: str = "exact",
 ) -> Measurement:
     """Send ``payload`` from end a to end b over the impaired line; measure it.
 
@@ -205,9 +237,10 @@ def simulate(
         burst=burst,
     )
     link = LinkConfig.symmetric(direction, seed=seed)
+    hinted_delay, hinted_rate = hinted(hints, delay, rate)
     cfg = EndpointConfig(
-        one_way_delay=delay,
-        line_rate=rate,
+        one_way_delay=hinted_delay,
+        line_rate=hinted_rate,
         bits_per_char=BITS_PER_CHAR,
         window=window,
         max_packet_length=max_len,
