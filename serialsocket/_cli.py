@@ -18,7 +18,16 @@ from collections.abc import Sequence
 
 from . import __version__
 from ._checks import BlockCheck
-from ._cliargs import (
+from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
+from ._errors import LocalProtocolError, MalformedDataError
+from ._kermit_cli import add_arguments as add_kermit_arguments
+from ._kermit_cli import kermit_main
+from ._netcat import add_arguments as add_netcat_arguments
+from ._netcat import netcat_main
+from ._packet import Packet, build_packet, data_capacity
+from ._parser import PacketParser, PacketReceived
+from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, SEQ_MODULUS
+from .argtypes import (
     BAUD,
     DELAY,
     ENDPOINT_LENGTH,
@@ -30,15 +39,6 @@ from ._cliargs import (
     PacketTypeLetter,
     retype,
 )
-from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
-from ._errors import LocalProtocolError, MalformedDataError
-from ._kermit_cli import add_arguments as add_kermit_arguments
-from ._kermit_cli import kermit_main
-from ._netcat import add_arguments as add_netcat_arguments
-from ._netcat import netcat_main
-from ._packet import Packet, build_packet, data_capacity
-from ._parser import PacketParser, PacketReceived
-from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH, SEQ_MODULUS
 
 __all__ = ["main"]
 

@@ -17,9 +17,9 @@ from dataclasses import asdict
 import trio
 
 from ._checks import BlockCheck
-from ._cliargs import BAUD, KERMIT_LENGTH, KERMIT_TIMEOUT, KERMIT_WINDOW, RETRIES, SERIAL_PORT
 from ._errors import LocalProtocolError
 from ._port import open_port
+from .argtypes import BAUD, KERMIT_LENGTH, KERMIT_TIMEOUT, KERMIT_WINDOW, RETRIES, SERIAL_PORT
 from .kermit import KermitConfig, KermitStatistics, KermitTransferError, kermit_receive, kermit_send
 
 __all__ = ["add_arguments", "kermit_main"]

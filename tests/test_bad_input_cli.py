@@ -25,9 +25,10 @@ from linksim.cli import _args as link_args
 from linksim.cli import _bench as bench_cli
 from linksim.cli import _link as link_options
 from linksim.cli import _main as linksim_cli
+from linksim.cli import _proxy as proxy_cli
 from serialsocket import EndpointConfig
 from serialsocket import _cli as serial_cli
-from serialsocket import _cliargs as serial_args
+from serialsocket import argtypes as serial_args
 from serialsocket.kermit import KermitConfig
 from tcpstream import _cli as tcp_cli
 
@@ -219,7 +220,7 @@ def test_unreadable_config_files_are_config_errors(tmp_path: pathlib.Path) -> No
 # all) and each option's ``type=`` says which values lie outside it.  An option
 # whose type the generator does not know fails test_every_option_is_classified
 # until it gets a range-checked converter (linksim/cli/_args.py,
-# serialsocket/_cliargs.py) or a line in FREE_TEXT saying where it is checked.
+# serialsocket/argtypes.py) or a line in FREE_TEXT saying where it is checked.
 
 Main = Callable[[list[str]], int]
 
@@ -271,6 +272,8 @@ FREE_TEXT = {
     "plot": "bench goodput: a PNG written",
     "plot_delay": "bench goodput: a PNG written",
     "plot_ber": "bench goodput: a PNG written",
+    "write_config": "relay --write-config: a file written (never over one), exit 1",
+    "write_world": "arm-server --write-world: a file written (never over one), exit 1",
 }
 
 INT_RANGES = (link_args.IntRange, serial_args.IntRange)
@@ -283,6 +286,16 @@ CUSTOM: dict[object, list[str]] = {
     link_options._outage: ["x", "5:1", "-1:2", "1:2:3", "nan:1", "1:inf"],
     bench_cli._length: ["x", "5", "100000", "nan", ""],
     serial_cli._check: ["0", "4", "x", ""],
+    proxy_cli._listen: ["x", "70000", "-1", "host:", ""],
+    proxy_cli._target: ["x", "127.0.0.1:0", "127.0.0.1:70000", ":x", ""],
+    proxy_cli._cut: ["sideways:10", "up:-1", "up", "down:x", ""],
+}
+
+CUSTOM_GOOD: dict[object, str] = {
+    # A value the hand-written converters accept (for required options).
+    proxy_cli._listen: "0",
+    proxy_cli._target: "127.0.0.1:9",
+    proxy_cli._cut: "up:10",
 }
 
 
@@ -320,7 +333,7 @@ def _good_value(action: argparse.Action) -> str:
         return repr(conv.hi)
     if isinstance(conv, PORT_NAMES):
         return "loop://"
-    return "x"
+    return CUSTOM_GOOD.get(conv, "x")
 
 
 def _walk(
@@ -403,7 +416,7 @@ def test_every_option_is_classified() -> None:
         if _bad_values(action) is None
     ]
     assert not unknown, (
-        "options with no range-checked converter: give them one from _cliargs.py "
+        "options with no range-checked converter: give them one from serialsocket.argtypes "
         "(or, for free text, a FREE_TEXT line saying where it is checked): " + "; ".join(unknown)
     )
 

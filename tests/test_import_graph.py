@@ -38,7 +38,7 @@ coverage-guided fuzzing), so that the demo and everything else run without them.
 
 COMMAND_LINE = {
     "serialsocket._cli",
-    "serialsocket._cliargs",
+    "serialsocket.argtypes",  # the converters (public: linksim's command line uses them)
     "serialsocket._netcat",  # the `listen` / `connect` commands: stdin/stdout and exit codes
     "serialsocket.kermit._cli",
     "serialsocket._kermit_cli",

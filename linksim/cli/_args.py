@@ -8,25 +8,18 @@ is opened, listened on or run::
 
 The converters are frozen dataclasses rather than closures so that a test can
 read their bounds and try values outside them for every option of every
-command (tests/test_bad_input_cli.py).  serialsocket keeps the same converters
-in serialsocket/_cliargs.py; this copy exists because linksim does not reach
-into serialsocket's private modules.
+command (tests/test_bad_input_cli.py).  The converter classes are
+serialsocket's public :mod:`serialsocket.argtypes`; the ranges are linksim's.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib.util
-import math
 import pathlib
-import pkgutil
 import sys
-from dataclasses import dataclass
-
-import serial
 
 from linksim.arm import DEFAULT_WORLD, WorldConfig
 from serialsocket import MAX_WINDOW
+from serialsocket.argtypes import FloatRange, IntRange, SerialPortName
 from serialsocket.packets import MAX_PACKET_LENGTH
 from tcpstream import load_key_file
 
@@ -57,94 +50,6 @@ __all__ = [
     "read_key",
     "write_template",
 ]
-
-
-def _number(x: float) -> str:
-    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
-
-
-@dataclass(frozen=True, slots=True)
-class IntRange:
-    """A decimal integer in ``lo..hi`` (``hi`` None: no upper bound)."""
-
-    lo: int
-    hi: int | None = None
-
-    def __call__(self, text: str) -> int:
-        try:
-            value: int | None = int(text, 10)
-        except ValueError:  # not a number, or more digits than int() takes
-            value = None
-        if value is None or value < self.lo or (self.hi is not None and value > self.hi):
-            raise argparse.ArgumentTypeError(
-                f"must be an integer in {self.describe()}, got {text!r}"
-            )
-        return value
-
-    def describe(self) -> str:
-        return f"{self.lo}..{self.hi}" if self.hi is not None else f">= {self.lo}"
-
-
-@dataclass(frozen=True, slots=True)
-class FloatRange:
-    """A finite number in ``[lo, hi]`` (``(lo, hi]`` when ``lo_open``), in ``unit``."""
-
-    lo: float
-    hi: float
-    lo_open: bool = False
-    unit: str = ""
-
-    def __call__(self, text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        above = value > self.lo if self.lo_open else value >= self.lo
-        if not (math.isfinite(value) and above and value <= self.hi):
-            what = f"a number of {self.unit}" if self.unit else "a number"
-            raise argparse.ArgumentTypeError(f"must be {what} in {self.describe()}, got {text!r}")
-        return value
-
-    def describe(self) -> str:
-        return f"{'(' if self.lo_open else '['}{_number(self.lo)}, {_number(self.hi)}]"
-
-
-def _url_schemes() -> list[str]:
-    """The URL schemes pyserial's ``serial_for_url`` can open (its protocol_NAME modules)."""
-    schemes: list[str] = []
-    for package in serial.protocol_handler_packages:
-        spec = importlib.util.find_spec(package)
-        if spec is None or spec.submodule_search_locations is None:
-            continue
-        for info in pkgutil.iter_modules(spec.submodule_search_locations):
-            if info.name.startswith("protocol_"):
-                schemes.append(info.name.removeprefix("protocol_"))
-    return sorted(set(schemes))
-
-
-@dataclass(frozen=True, slots=True)
-class SerialPortName:
-    """A device path, a pty path or a pyserial URL whose scheme pyserial knows.
-
-    Whether the device exists is found out when it is opened (exit status 1
-    or 2 by command, with the errno); this refuses what can never open.
-    """
-
-    def __call__(self, text: str) -> str:
-        if not text or "\0" in text:
-            raise argparse.ArgumentTypeError(
-                f"must be a device path, a pty or a pyserial URL (loop://, "
-                f"socket://HOST:PORT...), got {text!r}"
-            )
-        scheme, sep, _ = text.partition("://")
-        if sep:
-            known = _url_schemes()
-            if scheme.lower() not in known:
-                raise argparse.ArgumentTypeError(
-                    f"unknown URL scheme {scheme!r} in {text!r}: give a device path or one "
-                    f"of pyserial's {', '.join(s + '://' for s in known)}"
-                )
-        return text
 
 
 MAX_SECONDS = 30 * 86400.0

@@ -1,4 +1,8 @@
-"""Range-checked ``type=`` converters for the ``serialsocket`` command line.
+"""Range-checked ``type=`` converters for command lines of serial-line programs.
+
+Public so that other command lines (linksim's, yours) check their options the
+same way: :class:`IntRange`, :class:`FloatRange`, :class:`SerialPortName`,
+and the serialsocket command's own ranges.
 
 A converter refuses a bad value with argparse's own error, so a typo ends in
 one line naming the option and what it takes, exit status 2, before any port
@@ -8,9 +12,7 @@ is opened::
 
 The converters are frozen dataclasses rather than closures so that a test can
 read their bounds and try values outside them for every option of every
-command (tests/test_bad_input_cli.py).  linksim has its own copy
-(linksim/_cliargs.py): serialsocket never imports linksim, and linksim does not
-reach into serialsocket's private modules.
+command (tests/test_bad_input_cli.py).
 """
 
 from __future__ import annotations
