@@ -33,7 +33,7 @@ _SPEEDUP = FloatRange(0.0, 1e6, unit="times real time")
 
 def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim console`` (those of ``linksim control``, plus the console's)."""
-    add_link_arguments(ap)
+    add_link_arguments(ap, default_preset="noisy-moon")
     ap.add_argument("--transport", choices=["serial", "tcp"], default="serial")
     ap.add_argument(
         "--virtual",

@@ -52,7 +52,7 @@ def _common(ap: argparse.ArgumentParser) -> None:
 
 def add_demo_arguments(ap: argparse.ArgumentParser) -> None:
     """Options of ``linksim demo``."""
-    add_link_arguments(ap)
+    add_link_arguments(ap, default_preset="noisy-moon")
     ap.set_defaults(preset=None)
     _common(ap)
     ap.add_argument("--dial", metavar="NUMBER", help="dial through emulated Hayes modems")

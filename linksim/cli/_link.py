@@ -30,10 +30,13 @@ def _burst(text: str) -> GilbertElliott:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_link_arguments(ap: argparse.ArgumentParser) -> None:
-    """Options that describe the line (shared by relay and benchmarks)."""
+def add_link_arguments(ap: argparse.ArgumentParser, *, default_preset: str = "clean") -> None:
+    """Options that describe the line (shared by relay and benchmarks).
+
+    ``default_preset`` only names, in the help, the preset the command uses
+    when neither ``--preset`` nor ``--config`` is given."""
     g = ap.add_argument_group("line (applied to both directions, over --preset or --config)")
-    g.add_argument("--preset", choices=PRESETS, help="named preset (default: clean)")
+    g.add_argument("--preset", choices=PRESETS, help=f"named preset (default: {default_preset})")
     g.add_argument("--config", type=pathlib.Path, help="TOML file (see LinkConfig.from_toml)")
     g.add_argument("--seed", type=SEED, help="RNG seed (default 0)")
     g.add_argument("--rate", type=BIT_RATE, help="line rate, bit/s")

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 
+import pytest
+
 from linksim import DemoOptions, LinkConfig, Outage, run_demo
+from linksim.cli import main
 
 
 def test_a_link_that_dies_is_reported_as_the_link_failing() -> None:
@@ -23,3 +26,13 @@ def test_a_link_that_dies_is_reported_as_the_link_failing() -> None:
     assert "the link to the arm was lost" in error
     assert "outcome unknown" in error
     assert "Error(" not in error  # no Python repr
+
+
+@pytest.mark.parametrize("command", ["demo", "console"])
+def test_help_names_the_preset_the_command_runs(
+    command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The demo and the console run noisy-moon without --preset; --help said clean."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert "named preset (default: noisy-moon)" in " ".join(capsys.readouterr().out.split())
