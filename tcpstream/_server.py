@@ -102,6 +102,10 @@ class ServerStatistics:
     flushing the REFUSE) that were closed to admit a newer one when the server
     was full (a flood of idle sockets cannot keep a controller out; see
     PROTOCOL.md section 10)."""
+    commands_after_close: int = 0
+    """Commands that arrived in the same read as the packet closing their session:
+    not run (no ACCEPTED could be sent; the controller counts them outcome
+    unknown); an emergency stop among them still stops the arm."""
 
 
 @dataclass(slots=True)
@@ -213,6 +217,7 @@ class Server:
                 "telemetry_skipped",
                 "throttled",
                 "handshakes_evicted",
+                "commands_after_close",
             ),
             0,
         )
@@ -345,6 +350,16 @@ class Server:
     # --- events from connections ----------------------------------------------
 
     def _on_event(self, link: _Link, event: Event) -> None:
+        if link.conn.closed and isinstance(event, CommandReceived | EmergencyStopRequested):
+            # A command parsed in the same read as the packet that closed the
+            # session (the controller's BYE, or a fault): nobody can be told
+            # it was accepted, so it is not run -- the controller counts it
+            # as outcome unknown and resumes under its identity.  A stop is
+            # still obeyed: stopping is always safe.
+            self._stats["commands_after_close"] += 1
+            if isinstance(event, EmergencyStopRequested):
+                self._halt_all(FailureReason.STOPPED, "emergency stop")
+            return
         if isinstance(event, CommandReceived):
             self._submit(link, event.request_id, event.command, event.failures_seen)
         elif isinstance(event, EmergencyStopRequested):

@@ -424,3 +424,25 @@ def test_a_megabyte_flood_leaves_memory_flat() -> None:
             await _still_serves(server, arm, opener)
 
     run(main)
+
+
+def test_a_command_in_the_same_read_as_the_bye_is_not_run_and_crashes_nothing() -> None:
+    """A COMMAND and the BYE right behind it, in one write: the session is closed
+    by the time the command is looked at.  It used to be accepted anyway, and
+    the ACCEPTED on a closed session crashed the server (IllegalTransition,
+    seen when Ctrl-C interrupted a demo); now it is not run and is counted."""
+
+    async def main() -> None:
+        async with serving() as (server, arm, opener):
+            peer, client, events = await _session(opener, name="quitter")
+            assert any(isinstance(e, Granted) for e in events), events
+            client.send_command(1, commands.move_joint(1, 0.1), trio.current_time())
+            client.close(CloseReason.NORMAL, trio.current_time())
+            await peer.send(client.data_to_send())  # both packets, one write
+            await trio.sleep(0.5)
+            assert arm.executed == []
+            assert server.statistics().commands_after_close == 1
+            await peer.stream.aclose()
+            await _still_serves(server, arm, opener)
+
+    run(main)
