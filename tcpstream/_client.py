@@ -125,13 +125,18 @@ class CommandHandle:
     async def accepted(self) -> int:
         """Wait until the arm queued the command; its queue position.
 
-        Raises the command's failure if it failed before being queued.
+        Raises the command's failure if it failed before being queued.  A
+        command that completed although its ACCEPTED was never heard (both
+        replies were lost with the link and the arm answered COMPLETED from
+        memory on the resume) was queued: this returns 0, position unknown,
+        as the asyncio client does.
         """
         await self._accepted.wait()
-        if self.position is None:
-            assert self.error is not None
+        if self.position is not None:
+            return self.position
+        if self.error is not None:
             raise self.error
-        return self.position
+        return 0
 
     async def completed(self) -> CommandResult:
         """Wait for the outcome; raises :class:`CommandFailed` or :class:`SessionClosed`."""

@@ -497,3 +497,58 @@ def test_after_a_deadman_the_resumed_controller_learns_why_its_command_stopped()
     run(main)
     assert arm.count(CommandCode.MOVE_JOINTS) == 1
     assert arm.halts[0] is FailureReason.DEADMAN
+
+
+class _DeafStream(trio.abc.Stream):
+    """A client stream that stops hearing the arm once ``deaf`` is set: what
+    the controller sends still arrives, every reply is lost with the link."""
+
+    def __init__(self, inner: trio.abc.Stream) -> None:
+        self.inner = inner
+        self.deaf = False
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        while True:
+            data = await self.inner.receive_some(max_bytes)
+            if not self.deaf or not data:
+                return data
+
+    async def aclose(self) -> None:
+        await self.inner.aclose()
+
+
+def test_a_command_whose_accepted_was_lost_is_accepted_when_it_completes() -> None:
+    """The ACCEPTED and COMPLETED of a command are both lost with the link;
+    after the resume the arm answers COMPLETED from memory, with no ACCEPTED.
+    ``accepted()`` returns (the arm did queue it) instead of tripping an
+    assertion: seen in the README tour as a traceback from ``linksim control``
+    through ``linksim proxy --cut``."""
+    arm = FakeArm(move_time=1.0)
+    streams: list[_DeafStream] = []
+
+    async def main() -> None:
+        async with wired(arm, PATIENT) as w:
+
+            async def factory() -> trio.abc.Stream:
+                stream = _DeafStream(await w.factory())
+                streams.append(stream)
+                return stream
+
+            async with ArmClient(factory, reconnect_delay=3.0) as c:
+                streams[-1].deaf = True
+                handle = await c.submit(commands.move_joints([0.3] * 6))
+                await trio.sleep(2.0)  # ran and finished; both replies lost
+                await w.break_link()
+                result = await handle.completed()
+                assert await handle.accepted() == 0  # the position was never heard
+                assert result.feedback.joints == (0.3,) * 6
+                assert w.server.statistics().duplicates_answered == 1
+
+    run(main)
+    assert arm.count(CommandCode.MOVE_JOINTS) == 1
