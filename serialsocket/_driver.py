@@ -9,9 +9,11 @@ After any of these, waiters are woken through one "something changed" event,
 and every waiter re-checks its own condition (no lost wake-ups: trio is
 single-threaded, and a waiter takes the event before it awaits it).
 
-Also here: the causes chained to ``trio.BrokenResourceError`` when a link
-breaks (:class:`LinkBroken` and its kinds), which the driver records and the
-sockets raise.  :mod:`serialsocket._socket` builds the sessions on top.
+The causes chained to ``trio.BrokenResourceError`` when a link breaks
+(:class:`LinkBroken` and its kinds), which the driver records and the
+sockets raise, live in :mod:`serialsocket._outcome` (the asyncio adapter
+raises the same ones) and are re-exported here.  :mod:`serialsocket._socket`
+builds the sessions on top.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import trio
 
 from ._endpoint import Endpoint
 from ._events import ConnectionAborted, LinkDead
+from ._outcome import LineFailed, LinkBroken, LinkDeadError, PeerAborted
 
 __all__ = ["LineFailed", "LinkBroken", "LinkDeadError", "PeerAborted"]
 
@@ -34,44 +37,6 @@ _READ_SIZE = 65536
 _FLUSH_GRACE = 0.5
 """Seconds (plus the line time of what is pending) allowed to push out a last
 E or ACK when a session is torn down; a local I/O bound, not a protocol timer."""
-
-
-class LinkBroken(Exception):
-    """Base of the causes chained to ``BrokenResourceError``."""
-
-
-class PeerAborted(LinkBroken):
-    """The peer ended the connection with an E packet.
-
-    Attributes:
-        reason: the peer's text.
-    """
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(f"the peer aborted the connection: {reason}")
-        self.reason = reason
-
-
-class LinkDeadError(LinkBroken):
-    """The peer fell silent for longer than ``dead_after``.
-
-    Attributes:
-        report: the endpoint's LinkDead event (bytes acknowledged, in flight,
-            never sent).
-    """
-
-    def __init__(self, report: LinkDead) -> None:
-        super().__init__(
-            f"link dead after {report.silence:.1f} s of silence: "
-            f"{report.bytes_acknowledged} bytes acknowledged, "
-            f"{report.bytes_in_flight} in flight (may or may not have arrived), "
-            f"{report.bytes_unsent} never sent"
-        )
-        self.report = report
-
-
-class LineFailed(LinkBroken):
-    """The port failed or reached EOF (the device went away, the relay stopped)."""
 
 
 class _Driver:

@@ -21,8 +21,9 @@ Errors at the stream boundary are trio's: an ``OSError`` (pyserial's
 
 pty pitfalls handled here: pyserial's DTR/RTS ioctls fail on a pty with
 ``EINVAL`` or ``ENOTTY`` (a pty has no modem lines); pyserial >= 3.5 ignores
-that while opening, and :func:`_open_serial` ignores exactly those two errnos
-around the whole open for older releases and for the ``dsrdtr`` path.  A pty
+that while opening, and :func:`serialsocket._pyserial.open_serial` (shared with
+the asyncio port) ignores exactly those two errnos around the whole open for
+older releases and for the ``dsrdtr`` path.  A pty
 master reads ``EIO`` once the slave side is closed (the "device went away"
 case); that surfaces as ``BrokenResourceError`` like any other line failure.
 """
@@ -32,28 +33,19 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import termios
 import threading
 import tty
-from dataclasses import dataclass
 from typing import Any, Protocol
 
-import serial
 import trio
+
+from ._pyserial import THREAD_READ_TIMEOUT as _THREAD_READ_TIMEOUT
+from ._pyserial import PortStatistics, check_line_settings, open_serial, read_blocks_for_one_byte
 
 __all__ = ["PortStatistics", "SerialPort", "open_port", "open_pty_pair", "port_statistics"]
 
 _READ_SIZE = 65536
 """Bytes asked of the device per read; a pty hands out at most ~4 KB anyway."""
-
-_THREAD_READ_TIMEOUT = 0.05
-"""Seconds one blocking read in the reader thread waits before it looks at
-the stop flag again: bounds how long closing a URL port takes."""
-
-_THREAD_WRITE_TIMEOUT = 5.0
-"""Seconds one blocking write of a chunk may take before the port is declared
-broken (a chunk is at most ``_THREAD_WRITE_CHUNK`` bytes: 0.4 s at 9600 bit/s,
-so only a stalled device gets near this)."""
 
 _THREAD_WRITE_CHUNK = 4096
 """Bytes per worker-thread write: keeps each uncancellable wait short."""
@@ -61,30 +53,6 @@ _THREAD_WRITE_CHUNK = 4096
 _THREAD_QUEUE = 16
 """Chunks the reader thread may hold before it stops reading (back-pressure):
 16 x 64 KB bounds the memory of a port whose reader is slow."""
-
-_DTR_ERRNOS = frozenset({errno.EINVAL, errno.ENOTTY})
-"""What a modem-control ioctl returns on a pty (it has no DTR/RTS lines)."""
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class PortStatistics:
-    """What passed through a port.
-
-    Attributes:
-        name: the path or URL it was opened with.
-        bytes_in: bytes read.
-        bytes_out: bytes written.
-        reads: reads that returned data.
-        writes: ``send_all`` calls that completed.
-        errors: OS errors seen (each broke the port).
-    """
-
-    name: str
-    bytes_in: int
-    bytes_out: int
-    reads: int
-    writes: int
-    errors: int
 
 
 class _Transport(Protocol):
@@ -366,84 +334,6 @@ class _ThreadTransport:
 # -- opening -------------------------------------------------------------------------
 
 
-_BYTESIZES = (5, 6, 7, 8)
-_PARITIES = {"N": "none", "E": "even", "O": "odd", "M": "mark", "S": "space"}
-_STOPBITS = (1, 1.5, 2)
-
-
-def _check_line_settings(
-    path_or_url: object, baud: object, bytesize: object, parity: object, stopbits: object
-) -> None:
-    """Refuse at once, with a typed error, what pyserial would refuse later or
-    misbehave on (an open ``serial.Serial`` passed as the path used to hang)."""
-    if not isinstance(path_or_url, str):
-        raise TypeError(
-            f"open_port takes a device path or a pyserial URL string, not "
-            f"{type(path_or_url).__name__}; pass the port's name (e.g. ser.port) instead"
-        )
-    if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
-        raise ValueError(f"baud must be a positive integer (bit/s), got {baud!r}")
-    if bytesize not in _BYTESIZES or isinstance(bytesize, bool):
-        raise ValueError(f"bytesize must be one of {_BYTESIZES}, got {bytesize!r}")
-    if parity not in _PARITIES:
-        raise ValueError(f"parity must be one of {'/'.join(_PARITIES)}, got {parity!r}")
-    if stopbits not in _STOPBITS or isinstance(stopbits, bool):
-        raise ValueError(f"stopbits must be one of {_STOPBITS}, got {stopbits!r}")
-
-
-def _open_serial(
-    url: str,
-    *,
-    baud: int,
-    bytesize: int = 8,
-    parity: str = "N",
-    stopbits: float = 1,
-    xonxoff: bool,
-    rtscts: bool,
-    thread_io: bool,
-    exclusive: bool,
-) -> Any:
-    """An open pyserial object, raw, with the DTR pitfall on ptys absorbed."""
-    ser = serial.serial_for_url(
-        url,
-        do_not_open=True,
-        baudrate=baud,
-        bytesize=bytesize,
-        parity=parity,
-        stopbits=stopbits,
-        xonxoff=xonxoff,
-        rtscts=rtscts,
-        timeout=_THREAD_READ_TIMEOUT if thread_io else 0,
-        write_timeout=_THREAD_WRITE_TIMEOUT if thread_io else None,
-    )
-    if exclusive and hasattr(ser, "exclusive"):
-        ser.exclusive = True
-    try:
-        ser.open()
-    except OSError as exc:
-        if exc.errno in _DTR_ERRNOS and getattr(ser, "is_open", False):
-            return ser  # only the modem-line ioctl failed: a pty, usable as is
-        raise
-    return ser
-
-
-def _read_blocks_for_one_byte(fd: int) -> None:
-    """VMIN = 1, VTIME = 0: a read waits for at least one byte.
-
-    pyserial leaves VMIN = VTIME = 0 (it times reads with select), and in
-    that mode a tty read with no data returns 0 bytes -- even on a
-    non-blocking fd, where EAGAIN is expected -- which FdStream would report
-    as end of file.  With VMIN = 1 a non-blocking read says EAGAIN and trio
-    waits for the fd to become readable.
-    """
-    attrs = termios.tcgetattr(fd)
-    cc = attrs[6]
-    if cc[termios.VMIN] != 1 or cc[termios.VTIME] != 0:
-        cc[termios.VMIN] = 1
-        cc[termios.VTIME] = 0
-        termios.tcsetattr(fd, termios.TCSANOW, attrs)
-
-
 async def open_port(
     path_or_url: str,
     baud: int = 9600,
@@ -481,38 +371,24 @@ async def open_port(
         ValueError: a bad setting or an unknown URL scheme.
         TypeError: ``path_or_url`` is not a string (an open ``serial.Serial``).
     """
-    _check_line_settings(path_or_url, baud, bytesize, parity, stopbits)
+    check_line_settings(path_or_url, baud, bytesize, parity, stopbits)
     await trio.lowlevel.checkpoint()
     thread_io = "://" in path_or_url
-    try:
-        ser = _open_serial(
-            path_or_url,
-            baud=baud,
-            bytesize=bytesize,
-            parity=parity,
-            stopbits=stopbits,
-            xonxoff=xonxoff,
-            rtscts=rtscts,
-            thread_io=thread_io,
-            exclusive=exclusive,
-        )
-    except (KeyError, TypeError) as exc:
-        # pyserial parses a URL's ?options while opening and lets a bad one
-        # escape as KeyError ('loop://?logging=nope').
-        raise ValueError(
-            f"bad option in {path_or_url!r}: {exc}; see pyserial's URL handlers for what "
-            "each scheme accepts"
-        ) from exc
-    except serial.SerialException as exc:
-        # pyserial's text repeats the errno and the path; say each once.
-        why = os.strerror(exc.errno) if exc.errno else str(exc)
-        raise OSError(
-            exc.errno, f"cannot open {path_or_url!r}: {why} (check the path and its permissions)"
-        ) from exc
+    ser = open_serial(
+        path_or_url,
+        baud=baud,
+        bytesize=bytesize,
+        parity=parity,
+        stopbits=stopbits,
+        xonxoff=xonxoff,
+        rtscts=rtscts,
+        thread_io=thread_io,
+        exclusive=exclusive,
+    )
     if thread_io:
         return SerialPort(_ThreadTransport(ser), path_or_url, ser)
     try:
-        _read_blocks_for_one_byte(ser.fd)
+        read_blocks_for_one_byte(ser.fd)
         transport = _FdTransport(ser.fd, ser)
     except BaseException:
         ser.close()

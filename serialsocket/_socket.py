@@ -25,15 +25,15 @@ import logging
 import operator
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from contextlib import asynccontextmanager, contextmanager
-from dataclasses import dataclass
 
 import trio
 
 from ._config import EndpointConfig
 from ._driver import _READ_SIZE, LineFailed, LinkBroken, LinkDeadError, PeerAborted, _Driver
-from ._endpoint import Endpoint, EndpointStatistics
+from ._endpoint import Endpoint
 from ._errors import LocalProtocolError
-from ._port import PortStatistics, port_statistics
+from ._outcome import SocketStatistics, ending
+from ._port import port_statistics
 from ._state import TERMINAL, State
 
 __all__ = [
@@ -52,28 +52,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class SocketStatistics:
-    """The ARQ record plus what the port saw.
-
-    Attributes:
-        link: the endpoint's statistics.
-        port_reads: read calls that returned data.
-        port_writes: write calls.
-        port_bytes_in: bytes read from the port.
-        port_bytes_out: bytes written to the port.
-        port: the port's own record (its name and OS errors) when the port
-            keeps one (a :class:`~serialsocket.SerialPort`), else None.
-    """
-
-    link: EndpointStatistics
-    port_reads: int
-    port_writes: int
-    port_bytes_in: int
-    port_bytes_out: int
-    port: PortStatistics | None = None
 
 
 class SerialSocket(trio.abc.HalfCloseableStream):
@@ -506,16 +484,9 @@ async def serve(
 
 
 def _ending(d: _Driver, what: str | None = None) -> str | None:
-    """None if the connection on ``d`` ended delivered, else what happened, with the counts.
-
-    Delivered: every byte we were given is acknowledged and the peer's EOF
-    arrived (the closing handshake done, or only its last ACK missing: that
-    is no data lost).  Anything else -- a close given up, an abort either
-    way, a dead link, a failed line -- is reported, whichever side noticed.
-    """
+    """None if the connection on ``d`` ended delivered, else what happened, with
+    the counts (:func:`serialsocket._outcome.ending`)."""
     ep = d.ep
-    if ep.state in (State.CLOSED, State.LINGER) or ep.data_settled:
-        return None
     if what is None:
         if d.broken is not None:
             what = str(d.broken)
@@ -525,14 +496,4 @@ def _ending(d: _Driver, what: str | None = None) -> str | None:
             what = "the serial socket stopped before the close finished"
         else:
             what = f"the connection ended ({ep.state.value})"
-    return f"the connection did not close cleanly: {what}; {counts(ep.statistics())}"
-
-
-def counts(st: EndpointStatistics) -> str:
-    """What was delivered each way, in a user's words (for failure reports)."""
-    peer_eof = "its EOF received" if st.eof_received else "its EOF not received"
-    return (
-        f"sent: {st.bytes_acknowledged} bytes acknowledged, {st.bytes_in_flight} in flight "
-        f"(may or may not have arrived), {st.bytes_queued} never sent; "
-        f"received: {st.bytes_delivered} bytes from the peer, {peer_eof}"
-    )
+    return ending(ep, what)

@@ -1,0 +1,190 @@
+"""Opening a port with pyserial: what the trio and the asyncio ports share.
+
+:func:`open_serial` checks the line settings, opens a device path, a pty
+path or a pyserial URL (``loop://``, ``socket://``, ``spy://``) in raw mode,
+absorbs the pty DTR pitfall and maps pyserial's errors to ``ValueError`` and
+``OSError``; :func:`read_blocks_for_one_byte` sets the termios VMIN/VTIME
+that non-blocking reads need.  :class:`PortStatistics` is the record both
+kinds of port keep.  No trio and no asyncio here: the I/O is the caller's
+(:mod:`serialsocket._port` for trio, :mod:`serialsocket._asyncio_port` for
+asyncio).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import termios
+from dataclasses import dataclass
+from typing import Any
+
+import serial
+
+__all__ = [
+    "THREAD_READ_TIMEOUT",
+    "THREAD_WRITE_TIMEOUT",
+    "PortStatistics",
+    "check_line_settings",
+    "open_serial",
+    "read_blocks_for_one_byte",
+]
+
+THREAD_READ_TIMEOUT = 0.05
+"""Seconds one blocking read in the reader thread waits before it looks at
+the stop flag again: bounds how long closing a URL port takes."""
+
+THREAD_WRITE_TIMEOUT = 5.0
+"""Seconds one blocking write of a chunk may take before the port is declared
+broken (a chunk is at most 4096 bytes: 0.4 s at 9600 bit/s, so only a
+stalled device gets near this)."""
+
+_DTR_ERRNOS = frozenset({errno.EINVAL, errno.ENOTTY})
+"""What a modem-control ioctl returns on a pty (it has no DTR/RTS lines)."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PortStatistics:
+    """What passed through a port.
+
+    Attributes:
+        name: the path or URL it was opened with.
+        bytes_in: bytes read.
+        bytes_out: bytes written.
+        reads: reads that returned data.
+        writes: ``send_all`` calls that completed.
+        errors: OS errors seen (each broke the port).
+    """
+
+    name: str
+    bytes_in: int
+    bytes_out: int
+    reads: int
+    writes: int
+    errors: int
+
+
+_BYTESIZES = (5, 6, 7, 8)
+_PARITIES = {"N": "none", "E": "even", "O": "odd", "M": "mark", "S": "space"}
+_STOPBITS = (1, 1.5, 2)
+
+
+def check_line_settings(
+    path_or_url: object, baud: object, bytesize: object, parity: object, stopbits: object
+) -> None:
+    """Refuse at once, with a typed error, what pyserial would refuse later or
+    misbehave on (an open ``serial.Serial`` passed as the path used to hang)."""
+    if not isinstance(path_or_url, str):
+        raise TypeError(
+            f"open_port takes a device path or a pyserial URL string, not "
+            f"{type(path_or_url).__name__}; pass the port's name (e.g. ser.port) instead"
+        )
+    if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
+        raise ValueError(f"baud must be a positive integer (bit/s), got {baud!r}")
+    if bytesize not in _BYTESIZES or isinstance(bytesize, bool):
+        raise ValueError(f"bytesize must be one of {_BYTESIZES}, got {bytesize!r}")
+    if parity not in _PARITIES:
+        raise ValueError(f"parity must be one of {'/'.join(_PARITIES)}, got {parity!r}")
+    if stopbits not in _STOPBITS or isinstance(stopbits, bool):
+        raise ValueError(f"stopbits must be one of {_STOPBITS}, got {stopbits!r}")
+
+
+def _open_raw(
+    url: str,
+    *,
+    baud: int,
+    bytesize: int,
+    parity: str,
+    stopbits: float,
+    xonxoff: bool,
+    rtscts: bool,
+    thread_io: bool,
+    exclusive: bool,
+) -> Any:
+    """An open pyserial object, raw, with the DTR pitfall on ptys absorbed."""
+    ser = serial.serial_for_url(
+        url,
+        do_not_open=True,
+        baudrate=baud,
+        bytesize=bytesize,
+        parity=parity,
+        stopbits=stopbits,
+        xonxoff=xonxoff,
+        rtscts=rtscts,
+        timeout=THREAD_READ_TIMEOUT if thread_io else 0,
+        write_timeout=THREAD_WRITE_TIMEOUT if thread_io else None,
+    )
+    if exclusive and hasattr(ser, "exclusive"):
+        ser.exclusive = True
+    try:
+        ser.open()
+    except OSError as exc:
+        if exc.errno in _DTR_ERRNOS and getattr(ser, "is_open", False):
+            return ser  # only the modem-line ioctl failed: a pty, usable as is
+        raise
+    return ser
+
+
+def open_serial(
+    path_or_url: str,
+    *,
+    baud: int,
+    bytesize: int = 8,
+    parity: str = "N",
+    stopbits: float = 1,
+    xonxoff: bool,
+    rtscts: bool,
+    thread_io: bool,
+    exclusive: bool,
+) -> Any:
+    """Open ``path_or_url`` with pyserial (settings already checked).
+
+    ``thread_io``: the port will be read and written by threads (a URL), so
+    reads time out after :data:`THREAD_READ_TIMEOUT` and writes after
+    :data:`THREAD_WRITE_TIMEOUT`; else reads never block (``timeout=0``).
+
+    Raises:
+        OSError: the port could not be opened (with the device's errno).
+        ValueError: a bad option in a URL.
+    """
+    try:
+        return _open_raw(
+            path_or_url,
+            baud=baud,
+            bytesize=bytesize,
+            parity=parity,
+            stopbits=stopbits,
+            xonxoff=xonxoff,
+            rtscts=rtscts,
+            thread_io=thread_io,
+            exclusive=exclusive,
+        )
+    except (KeyError, TypeError) as exc:
+        # pyserial parses a URL's ?options while opening and lets a bad one
+        # escape as KeyError ('loop://?logging=nope').
+        raise ValueError(
+            f"bad option in {path_or_url!r}: {exc}; see pyserial's URL handlers for what "
+            "each scheme accepts"
+        ) from exc
+    except serial.SerialException as exc:
+        # pyserial's text repeats the errno and the path; say each once.
+        why = os.strerror(exc.errno) if exc.errno else str(exc)
+        raise OSError(
+            exc.errno, f"cannot open {path_or_url!r}: {why} (check the path and its permissions)"
+        ) from exc
+
+
+def read_blocks_for_one_byte(fd: int) -> None:
+    """VMIN = 1, VTIME = 0: a read waits for at least one byte.
+
+    pyserial leaves VMIN = VTIME = 0 (it times reads with select), and in
+    that mode a tty read with no data returns 0 bytes -- even on a
+    non-blocking fd, where EAGAIN is expected -- which an event loop would
+    report as end of file.  With VMIN = 1 a non-blocking read says EAGAIN and
+    the loop waits for the fd to become readable.
+    """
+    attrs = termios.tcgetattr(fd)
+    cc = attrs[6]
+    if cc[termios.VMIN] != 1 or cc[termios.VTIME] != 0:
+        cc[termios.VMIN] = 1
+        cc[termios.VTIME] = 0
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
