@@ -11,8 +11,9 @@ Controller: :func:`connect_tcp` / :func:`connect_stream` give an
 
 Public submodules: :mod:`tcpstream.commands` (builders such as ``move_to``,
 the command set and the packet codec: what another implementation of the
-wire protocol needs) and :mod:`tcpstream.connection` (the sans-I/O
-connection cores, their events and the session state table).
+wire protocol needs), :mod:`tcpstream.connection` (the sans-I/O
+connection cores, their events and the session state table) and
+:mod:`tcpstream.teleop` (seed 004's teleoperation sample channel).
 """
 
 from importlib.metadata import PackageNotFoundError as _NotInstalled
@@ -27,6 +28,7 @@ except _NotInstalled:  # imported from a source tree that was never installed
 
 from . import commands as commands
 from . import connection as connection
+from . import teleop as teleop
 from ._api import DEFAULT_PORT, connect_stream, connect_tcp, serve_stream, serve_tcp
 from ._blocking import BlockingClient, WatchdogExpired
 from ._client import ArmClient, ClientStatistics, CommandHandle

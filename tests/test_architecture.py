@@ -202,6 +202,8 @@ TCPSTREAM_SANS_IO = [
     "_packet",
     "_server_connection",
     "_state",
+    "_teleop_connection",
+    "_teleop_packet",
 ]
 
 
@@ -341,7 +343,50 @@ def test_tcpstream_public_names_are_pinned() -> None:
             "transition",
         ]
     )
-    for module in (tcpstream, commands, connection):
+    from tcpstream import teleop  # the teleoperation channel (PROTOCOL.md section 14)
+
+    assert sorted(teleop.__all__) == sorted(
+        [
+            "MAGIC",
+            "TAG_SIZE",
+            "TELEOP_VERSION",
+            "TRANSITIONS",
+            "ArmChannel",
+            "Backlog",
+            "Buttons",
+            "ChannelClosed",
+            "ChannelState",
+            "ChannelStatistics",
+            "ContactFlags",
+            "Granted",
+            "IllegalTransition",
+            "OperatorArrived",
+            "OperatorChannel",
+            "RefuseCode",
+            "Refused",
+            "Reply",
+            "ReplyReceived",
+            "ReplyStatus",
+            "Sample",
+            "SampleArrived",
+            "StopArrived",
+            "TeleopArm",
+            "TeleopEvent",
+            "TeleopKind",
+            "TeleopMode",
+            "TeleopOperator",
+            "TeleopPacketError",
+            "TeleopRefused",
+            "decode_header",
+            "decode_reply",
+            "decode_sample",
+            "encode_reply",
+            "encode_sample",
+            "open_teleop",
+            "size_of",
+        ]
+    )
+    for module in (tcpstream, commands, connection, teleop):
         for name in module.__all__:
             assert getattr(module, name) is not None
     # Names that mean something else in serialsocket live only in the submodules.

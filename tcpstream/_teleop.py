@@ -1,0 +1,337 @@
+"""The teleoperation channel over a trio stream: the thin loops around the sans-I/O ends.
+
+One reader (bytes in, events out) and one writer per end.  The writer hands the
+stream a sample (or a reply) only when :meth:`OperatorChannel.poll` says the
+line can take it; until then newer samples replace the waiting one.  While a
+sample is held back the writer looks again every ``poll_interval`` (the
+transport's figures change without telling us).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import secrets
+from collections.abc import AsyncIterator, Callable
+
+import trio
+
+from ._teleop_connection import (
+    ArmChannel,
+    Backlog,
+    ChannelClosed,
+    ChannelState,
+    ChannelStatistics,
+    Granted,
+    OperatorArrived,
+    OperatorChannel,
+    RefuseCode,
+    Refused,
+    ReplyReceived,
+    SampleArrived,
+    StopArrived,
+    TeleopEvent,
+)
+from ._teleop_packet import Reply, Sample
+
+__all__ = ["TeleopArm", "TeleopOperator", "TeleopRefused", "open_teleop"]
+
+log = logging.getLogger(__name__)
+
+_READ = 4096
+"""Bytes per receive: 37 samples; the parser's buffer never holds more than this plus one packet."""
+
+BacklogProbe = Callable[[], Backlog | None]
+
+
+class TeleopRefused(Exception):
+    """The arm refused the channel, or it ended before the grant."""
+
+    def __init__(self, reason: RefuseCode, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+class _Pump:
+    def __init__(
+        self,
+        stream: trio.abc.Stream,
+        backlog: BacklogProbe | None,
+        poll_interval: float,
+    ) -> None:
+        self._stream = stream
+        self._backlog = backlog
+        self._poll_interval = poll_interval
+        self._wake = trio.Event()
+        self.closed = trio.Event()
+        self.writer_done = trio.Event()
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def _events(self, events: list[TeleopEvent]) -> None:
+        raise NotImplementedError
+
+    def _channel(self) -> OperatorChannel | ArmChannel:
+        raise NotImplementedError
+
+    def _holding(self) -> bool:
+        raise NotImplementedError
+
+    async def _reader(self) -> None:
+        ch = self._channel()
+        try:
+            while ch.state is not ChannelState.CLOSED:
+                data = await self._stream.receive_some(_READ)
+                if not data:
+                    self._events([ChannelClosed(RefuseCode.NORMAL, by_peer=True)])
+                    break
+                self._events(ch.receive_data(bytes(data), trio.current_time()))
+                self.wake()
+        except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+            log.debug("teleop reader ended: %r", exc)
+        finally:
+            self.closed.set()
+            self.wake()
+
+    async def _writer(self) -> None:
+        ch = self._channel()
+        try:
+            while True:
+                self._wake = trio.Event()
+                data = ch.data_to_send()
+                if not data:
+                    backlog = self._backlog() if self._backlog is not None else None
+                    if ch.poll(trio.current_time(), backlog):
+                        data = ch.data_to_send()
+                if data:
+                    await self._stream.send_all(data)
+                    continue
+                if ch.state is ChannelState.CLOSED or self.closed.is_set():
+                    return
+                wait = self._poll_interval if self._holding() else math.inf
+                with trio.move_on_after(wait):
+                    await self._wake.wait()
+        except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+            log.debug("teleop writer ended: %r", exc)
+            self.closed.set()
+        finally:
+            self.writer_done.set()
+
+
+class TeleopOperator(_Pump):
+    """The operator's end of a granted channel (from :func:`open_teleop`)."""
+
+    def __init__(
+        self,
+        stream: trio.abc.Stream,
+        channel: OperatorChannel,
+        backlog: BacklogProbe | None,
+        poll_interval: float,
+        on_reply: Callable[[Reply, float], None] | None,
+    ) -> None:
+        super().__init__(stream, backlog, poll_interval)
+        self.channel = channel
+        self._on_reply = on_reply
+        self.granted: Granted | None = None
+        self.refused: RefuseCode | None = None
+        self._decided = trio.Event()
+
+    def _channel(self) -> OperatorChannel:
+        return self.channel
+
+    def _holding(self) -> bool:
+        return self.channel.pending is not None
+
+    def _events(self, events: list[TeleopEvent]) -> None:
+        for ev in events:
+            if isinstance(ev, Granted):
+                self.granted = ev
+                self._decided.set()
+            elif isinstance(ev, Refused):
+                self.refused = ev.reason
+                self._decided.set()
+            elif isinstance(ev, ReplyReceived) and self._on_reply is not None:
+                self._on_reply(ev.reply, ev.now)
+            elif isinstance(ev, ChannelClosed):
+                self.refused = self.refused if self.granted else ev.reason
+                self._decided.set()
+
+    def submit(self, sample: Sample) -> None:
+        """Offer the newest sample (never blocks; an older unsent one is dropped)."""
+        if self.channel.state is ChannelState.OPEN:
+            self.channel.offer(sample)
+            self.wake()
+
+    def emergency_stop(self) -> None:
+        """Send STOP ahead of every sample not yet on the line."""
+        self.channel.emergency_stop()
+        self.wake()
+
+    @property
+    def last_reply(self) -> Reply | None:
+        return self.channel.last_reply
+
+    def statistics(self) -> ChannelStatistics:
+        return self.channel.statistics()
+
+
+@contextlib.asynccontextmanager
+async def open_teleop(
+    stream: trio.abc.Stream,
+    *,
+    identity: str,
+    key: bytes | None = None,
+    backlog: BacklogProbe | None = None,
+    on_reply: Callable[[Reply, float], None] | None = None,
+    poll_interval: float = 0.002,
+    nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+) -> AsyncIterator[TeleopOperator]:
+    """Open the teleoperation channel on ``stream`` and yield the granted operator end.
+
+    ``backlog`` returns the transport's own figures (for a
+    :class:`serialsocket.SerialSocket`: ``Backlog(st.link.bytes_queued,
+    st.link.line_backlog)``); without it the channel paces itself by the
+    replies.  Raises :class:`TeleopRefused` when the arm refuses.  On exit
+    the channel says BYE and the stream is left open for its owner.
+    """
+    ch = OperatorChannel(identity, key, nonce_source(16))
+    op = TeleopOperator(stream, ch, backlog, poll_interval, on_reply)
+    # The loops live in a nursery entered by hand (as ArmClient's), so that an
+    # exception from the caller's block reaches the caller as itself, not
+    # wrapped in an exception group; the loops catch their own stream errors.
+    nursery_cm = trio.open_nursery()
+    nursery = await nursery_cm.__aenter__()
+    try:
+        nursery.start_soon(op._reader)
+        nursery.start_soon(op._writer)
+        ch.connect()
+        op.wake()
+        await op._decided.wait()
+        if op.granted is None:
+            reason = op.refused if op.refused is not None else RefuseCode.NORMAL
+            raise TeleopRefused(reason, f"the arm refused the teleoperation channel: {reason.name}")
+        yield op
+    finally:
+        if ch.state is not ChannelState.CLOSED:
+            ch.close()
+            op.wake()
+            with trio.move_on_after(1.0) as scope:
+                scope.shield = True
+                await op.writer_done.wait()  # the writer flushes the BYE, then ends
+        nursery.cancel_scope.cancel()
+        await nursery_cm.__aexit__(None, None, None)
+
+
+class TeleopArm:
+    """The arm's side: serves one operator at a time and keeps the newest sample.
+
+    The arm's control loop calls :meth:`latest` every tick and :meth:`reply`
+    with what it did; ``on_stop`` runs at once when a STOP arrives (halt the
+    arm there).  A second operator while one is connected is refused BUSY.
+    """
+
+    def __init__(
+        self,
+        *,
+        key: bytes | None = None,
+        rate_deadman: float,
+        control_rate: float,
+        on_stop: Callable[[], None] | None = None,
+        nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+        poll_interval: float = 0.002,
+    ) -> None:
+        self._key = key
+        self.rate_deadman = rate_deadman
+        self.control_rate = control_rate
+        self._on_stop = on_stop
+        self._nonce_source = nonce_source
+        self._poll_interval = poll_interval
+        self._current: _ArmPump | None = None
+        self._retired: list[ChannelStatistics] = []
+        self.stops = 0
+        self.refused = 0
+
+    @property
+    def connected(self) -> bool:
+        return self._current is not None and self._current.channel.state is ChannelState.OPEN
+
+    def latest(self) -> tuple[Sample, float] | None:
+        """The newest sample not yet taken, with its arrival time; None if none."""
+        return None if self._current is None else self._current.channel.take_latest()
+
+    def last_heard(self) -> float | None:
+        return None if self._current is None else self._current.channel.last_heard
+
+    def reply(self, reply: Reply) -> None:
+        if self._current is not None and self._current.channel.state is ChannelState.OPEN:
+            self._current.channel.reply(reply)
+            self._current.wake()
+
+    def statistics(self) -> ChannelStatistics | None:
+        if self._current is not None:
+            return self._current.channel.statistics()
+        return self._retired[-1] if self._retired else None
+
+    def _stopped(self) -> None:
+        self.stops += 1
+        if self._on_stop is not None:
+            self._on_stop()
+
+    async def serve_stream(
+        self, stream: trio.abc.Stream, *, backlog: BacklogProbe | None = None
+    ) -> None:
+        """Run the channel on ``stream`` until it closes (the stream is left to its owner)."""
+        ch = ArmChannel(
+            self._key,
+            self._nonce_source(16),
+            rate_deadman=self.rate_deadman,
+            control_rate=self.control_rate,
+        )
+        pump = _ArmPump(stream, ch, backlog, self._poll_interval, self)
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(pump._reader)
+            # The writer returns once the channel is over and its REFUSE or BYE is out.
+            await pump._writer()
+            nursery.cancel_scope.cancel()
+        if self._current is pump:
+            self._retired.append(ch.statistics())
+            self._current = None
+
+
+class _ArmPump(_Pump):
+    def __init__(
+        self,
+        stream: trio.abc.Stream,
+        channel: ArmChannel,
+        backlog: BacklogProbe | None,
+        poll_interval: float,
+        owner: TeleopArm,
+    ) -> None:
+        super().__init__(stream, backlog, poll_interval)
+        self.channel = channel
+        self._owner = owner
+
+    def _channel(self) -> ArmChannel:
+        return self.channel
+
+    def _holding(self) -> bool:
+        return self.channel.pending_reply is not None
+
+    def _events(self, events: list[TeleopEvent]) -> None:
+        for ev in events:
+            if isinstance(ev, OperatorArrived):
+                if self._owner.connected:
+                    self.channel.refuse(RefuseCode.BUSY)
+                    self._owner.refused += 1
+                else:
+                    self.channel.grant()
+                    self._owner._current = self
+            elif isinstance(ev, StopArrived):
+                self._owner._stopped()
+            elif isinstance(ev, Refused):
+                self._owner.refused += 1
+            elif isinstance(ev, SampleArrived | ChannelClosed):
+                pass
+        self.wake()
