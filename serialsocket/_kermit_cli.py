@@ -19,7 +19,15 @@ import trio
 from ._checks import BlockCheck
 from ._errors import LocalProtocolError
 from ._port import open_port
-from .argtypes import BAUD, KERMIT_LENGTH, KERMIT_TIMEOUT, KERMIT_WINDOW, RETRIES, SERIAL_PORT
+from .argtypes import (
+    BAUD,
+    DELAY,
+    KERMIT_LENGTH,
+    KERMIT_TIMEOUT,
+    KERMIT_WINDOW,
+    RETRIES,
+    SERIAL_PORT,
+)
 from .kermit import KermitConfig, KermitStatistics, KermitTransferError, kermit_receive, kermit_send
 
 __all__ = ["add_arguments", "kermit_main"]
@@ -32,16 +40,52 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     send.add_argument("files", metavar="FILE", nargs="+", help="files to send (binary mode)")
     recv = sub.add_parser("receive", help="receive files from a Kermit sender")
     recv.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
+    send.add_argument(
+        "--resend",
+        action="store_true",
+        help="recovery (C-Kermit's RESEND): send only what the receiver does not hold yet",
+    )
+    send.add_argument(
+        "--text",
+        action="store_true",
+        help="text mode: LF line ends go as CR LF (the receiver restores its own)",
+    )
     for p in (send, recv):
         p.add_argument(
             "--port", type=SERIAL_PORT, required=True, help="device path, pty or pyserial URL"
         )
-        p.add_argument("--baud", type=BAUD, default=9600, help="line rate (default 9600)")
+        p.add_argument(
+            "--baud",
+            type=BAUD,
+            default=None,
+            help="port speed in bit/s (default 9600); the timers and the packet length "
+            "also follow it (without it they assume 9600, then measure)",
+        )
+        p.add_argument(
+            "--delay",
+            type=DELAY,
+            default=0.0,
+            help="one-way delay of the line in seconds (a hint for the timers and the packet "
+            "length; 1.3 for the Moon)",
+        )
         p.add_argument(
             "--packet-length",
+            "--max-len",
+            dest="packet_length",
             type=KERMIT_LENGTH,
             default=1000,
-            help="longest packet, MARK through CHECK (default 1000; 96 or less = no long packets)",
+            help="longest packet, MARK through CHECK (default 1000; 96 or less = no long "
+            "packets); the sender picks shorter ones when it measures errors",
+        )
+        p.add_argument(
+            "--fixed-length",
+            action="store_true",
+            help="always send the longest packets the receiver accepts (no dynamic length)",
+        )
+        p.add_argument(
+            "--literal-names",
+            action="store_true",
+            help="file names as they are (default: common form on send, lower case on receive)",
         )
         p.add_argument(
             "--window", type=KERMIT_WINDOW, default=8, help="window slots, 1..31 (default 8)"
@@ -52,8 +96,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         p.add_argument(
             "--timeout",
             type=KERMIT_TIMEOUT,
-            help="fixed local timeout in seconds (default: what the peer asks for); "
-            "on a delayed link set it above the round trip of a full window",
+            help="fixed timeout in seconds (default: from --delay and --baud, then from "
+            "measured round trips)",
         )
         p.add_argument(
             "--retries",
@@ -65,8 +109,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
             "--seven-bit", action="store_true", help="7-bit line: require 8th-bit prefixing"
         )
         p.add_argument("--no-repeat", action="store_true", help="do not offer repeat counts")
-        p.add_argument("--stats", action="store_true", help="print the counters as JSON on stderr")
+        p.add_argument(
+            "--stats", "--json", action="store_true", help="print the counters as JSON on stderr"
+        )
         p.add_argument("-v", "--verbose", action="store_true", help="log each file to stderr")
+        p.add_argument("--trace", action="store_true", help="log every packet, decoded, to stderr")
 
 
 def _config(args: argparse.Namespace) -> KermitConfig:
@@ -78,11 +125,17 @@ def _config(args: argparse.Namespace) -> KermitConfig:
         retry_limit=args.retries,
         seven_bit=args.seven_bit,
         repeat=not args.no_repeat,
+        delay=args.delay,
+        rate=args.baud,
+        dynamic_length=not args.fixed_length,
+        literal_names=args.literal_names,
+        resend=getattr(args, "resend", False),
+        text=getattr(args, "text", False),
     )
 
 
 async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatistics:
-    port = await open_port(args.port, args.baud)
+    port = await open_port(args.port, args.baud or 9600)
     async with port:
         if args.kermit_command == "send":
             return await kermit_send(port, args.files, config)
@@ -103,6 +156,8 @@ def kermit_main(args: argparse.Namespace) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="kermit: %(message)s"
     )
+    if args.trace:
+        logging.getLogger("serialsocket.kermit").setLevel(logging.DEBUG)
     try:
         config = _config(args)
         stats = trio.run(_run, args, config)

@@ -31,6 +31,7 @@ SANS_IO = [
     "_sender",
     "_state",
     "_wire",
+    "kermit/_attributes",
     "kermit/_core",
     "kermit/_params",
     "kermit/_receiver",

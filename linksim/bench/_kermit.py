@@ -76,6 +76,17 @@ class TransferSetup:
         seed: the relay's random seed.
         seven_bit: treat the line as 7-bit: ours asks for 8th-bit prefixing,
             C-Kermit and G-Kermit use parity space (which makes them ask too).
+        literal_names: every side keeps file names as they are (C-Kermit
+            ``set file names literal``, G-Kermit ``-P``, ours
+            ``literal_names``); False: the Kermit default, common form on
+            the wire and lower case on arrival.
+        text: the sender sends in text mode (C-Kermit ``set file type
+            text``, G-Kermit without ``-i``, ours ``text``); receivers follow
+            the A packet.
+        resend: the sender uses RESEND (ours ``resend``, C-Kermit ``resend``).
+        dynamic_length: ours chooses its D packet length (False: always the
+            longest, as the bench compared before).
+        extra_ckermit: more C-Kermit commands, before SEND/RECEIVE.
     """
 
     sender: str
@@ -89,6 +100,11 @@ class TransferSetup:
     limit: float = 120.0
     seed: int = 1
     seven_bit: bool = False
+    literal_names: bool = True
+    text: bool = False
+    resend: bool = False
+    dynamic_length: bool = True
+    extra_ckermit: tuple[str, ...] = ()
 
 
 def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]) -> list[str]:
@@ -99,9 +115,9 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         "set flow none",
         "set parity space" if setup.seven_bit else "set parity none",
         "set streaming off",
-        "set file type binary",
+        "set file type text" if setup.text else "set file type binary",
         "set transfer mode manual",
-        "set file names literal",
+        "set file names literal" if setup.literal_names else "set file names converted",
         "set file collision overwrite",
         "set attributes on",
         f"set window {setup.window}",
@@ -110,9 +126,12 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         f"set send timeout {setup.timeout} fixed",
         f"set receive timeout {setup.timeout}",
         "set retry-limit 20",
+        *setup.extra_ckermit,
     ]
     if files:
         verb = "send" if len(files) == 1 else "msend"
+        if setup.resend:
+            verb = "resend"
         cmds.append(f"{verb} " + " ".join(str(f) for f in files))
     else:
         cmds.append("receive")
@@ -122,7 +141,11 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
 
 def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[str]:
     """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
-    argv = ["gkermit", "-q", "-i", "-P", "-w", "-S", "-b", str(setup.timeout)]
+    argv = ["gkermit", "-q", "-w", "-S", "-b", str(setup.timeout)]
+    if not setup.text:
+        argv.append("-i")
+    if setup.literal_names:
+        argv.append("-P")
     argv += ["-e", str(min(max(setup.packet_length, 40), 9000))]
     if setup.seven_bit:
         argv += ["-p", "s"]
@@ -136,6 +159,10 @@ def _our_config(setup: TransferSetup) -> KermitConfig:
         timeout=float(setup.timeout),
         retry_limit=20,
         seven_bit=setup.seven_bit,
+        literal_names=setup.literal_names,
+        text=setup.text,
+        resend=setup.resend,
+        dynamic_length=setup.dynamic_length,
     )
 
 
@@ -257,9 +284,12 @@ def run_transfer(
 
     Raises:
         RuntimeError: a side failed or timed out (message includes its output).
-        AssertionError: a received file differs from the original.
+        AssertionError: a received file differs from the original (checked
+            only with literal names in binary mode; otherwise by the caller).
     """
     result = trio.run(_transfer, setup, files, out_dir)
+    if setup.text or not setup.literal_names:
+        return result  # names or contents change on the way: the caller checks them
     for f in files:
         got = (out_dir / f.name).read_bytes()
         if got != f.read_bytes():

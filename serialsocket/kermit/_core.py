@@ -59,10 +59,16 @@ from serialsocket._checks import BlockCheck
 from serialsocket._encoding import Encoding
 from serialsocket._errors import LocalProtocolError, MalformedDataError, RemoteProtocolError
 from serialsocket._packet import Packet, build_packet
-from serialsocket._parser import PacketParser, PacketReceived
+from serialsocket._parser import PacketParser, PacketReceived, RejectReason
 from serialsocket._wire import CR, MAX_PACKET_LENGTH, PacketType
 
-from ._params import KermitConfig, KermitInit, KermitNegotiated, negotiate_kermit
+from ._params import (
+    INIT_TIMEOUT,
+    KermitConfig,
+    KermitInit,
+    KermitNegotiated,
+    negotiate_kermit,
+)
 
 __all__ = [
     "FileCompleted",
@@ -141,18 +147,28 @@ TRANSITIONS: dict[KermitState, frozenset[KermitState]] = {
 
 
 class Readable(Protocol):
-    """What the sender reads file contents from (a binary file, ``io.BytesIO``)."""
+    """What the sender reads file contents from (a binary file, ``io.BytesIO``).
+
+    ``seek`` is used only when a RESEND starts part-way into the file.
+    """
 
     def read(self, size: int, /) -> bytes: ...
+
+    def seek(self, offset: int, /) -> int: ...
 
 
 @dataclass(frozen=True, slots=True)
 class OutgoingFile:
-    """A file to send: the name the receiver sees, its size if known, and its bytes."""
+    """A file to send: its name, its size if known, its bytes, and its date.
+
+    ``date`` is the modification time as the A packet carries it,
+    ``yyyymmdd hh:mm:ss`` (the caller formats it: the core reads no clock).
+    """
 
     name: str
     size: int | None
     source: Readable
+    date: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,12 +189,15 @@ class FileData:
 class FileCompleted:
     """A file ended (Z acknowledged); ``discarded`` when the sender cancelled it (Z ``D``).
 
-    ``size`` is the length the A packet announced, if any (receiver only).
+    ``size`` is the length the A packet announced, if any (receiver only);
+    ``reason`` says why the receiver refused the file (sender only: the
+    refused attributes in words, e.g. ``size: it does not fit``).
     """
 
     name: str
     discarded: bool
     size: int | None = None
+    reason: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,11 +245,22 @@ class KermitStatistics:
         retransmissions: packets sent again.
         naks_sent, naks_received: NAK packets.
         timeouts: timer expiries.
-        damaged: packets or garbage runs the parser rejected.
+        damaged: packets the parser rejected (a MARK followed by a bad
+            length, header or check, or cut short).
+        noise_bytes: bytes outside any packet (line noise, a stray byte
+            before the first packet, a packet whose MARK was hit): ignored,
+            as C-Kermit's rpack() skips to the next MARK; not a damaged
+            packet and never answered with a NAK.
         bytes_sent, bytes_received: line bytes.
         eighth_bit_prefix: the agreed 8th-bit prefix (``&``), or None when
             8-bit bytes travel raw (or before the exchange).
         repeat_prefix: the agreed repeat prefix (``~``), or None.
+        timeout: the timeout in force, s.
+        data_packet_length: the length of the D packets being sent now
+            (sender; it follows the measured error rate), else
+            ``packet_length``.
+        resumed_bytes: bytes the receiver already held when files were
+            resent (recovery), all files counted: acknowledged, never sent.
     """
 
     state: KermitState
@@ -247,10 +277,14 @@ class KermitStatistics:
     naks_received: int
     timeouts: int
     damaged: int
+    noise_bytes: int
     bytes_sent: int
     bytes_received: int
     eighth_bit_prefix: str | None
     repeat_prefix: str | None
+    timeout: float
+    data_packet_length: int
+    resumed_bytes: int
 
 
 class KermitSide(abc.ABC):
@@ -278,7 +312,11 @@ class KermitSide(abc.ABC):
         self._file_bytes = 0
         self._sent = self._received = self._retransmissions = 0
         self._naks_sent = self._naks_received = self._timeouts = self._damaged = 0
+        self._noise = 0
         self._bytes_sent = self._bytes_received = 0
+        self._heard = False  # a good packet has arrived from the peer
+        self._started = 0.0  # when the machine was made (for "no answer at all")
+        self._resumed = 0  # bytes held by the receiver before a RESEND, all files
 
     # -- public surface ---------------------------------------------------------
 
@@ -315,12 +353,20 @@ class KermitSide(abc.ABC):
         self._parser.receive_data(data)
         while not self.finished and (event := self._parser.next_event()) is not None:
             if not isinstance(event, PacketReceived):
+                if event.reason is RejectReason.GARBAGE:
+                    # Bytes outside any packet: a stray byte before the first
+                    # packet, line noise, a packet whose MARK was hit.  C-Kermit
+                    # skips them looking for the next MARK; so do we (a lost
+                    # packet shows up as a gap or a timeout).
+                    self._noise += event.length
+                    continue
                 self._damaged += 1
                 if log.isEnabledFor(logging.DEBUG):
                     log.debug("%.3f <- damaged: %s %r", now, event.reason.value, event.raw[:12])
                 self._on_damage(now)
                 continue
             self._received += 1
+            self._heard = True
             packet = event.packet
             if log.isEnabledFor(logging.DEBUG):
                 log.debug("%.3f <- %s %d %r", now, packet.type, packet.seq, packet.data[:40])
@@ -374,10 +420,14 @@ class KermitSide(abc.ABC):
             naks_received=self._naks_received,
             timeouts=self._timeouts,
             damaged=self._damaged,
+            noise_bytes=self._noise,
             bytes_sent=self._bytes_sent,
             bytes_received=self._bytes_received,
             eighth_bit_prefix=_prefix(neg.send_encoding.qbin if neg else None),
             repeat_prefix=_prefix(neg.send_encoding.rept if neg else None),
+            timeout=self._timeout(),
+            data_packet_length=self._data_packet_length(),
+            resumed_bytes=self._resumed,
         )
 
     # -- shared internals -------------------------------------------------------
@@ -393,9 +443,15 @@ class KermitSide(abc.ABC):
         self._events.append(TransferFailed(message, by_peer))
 
     def _timeout(self) -> float:
+        """The timeout in force (roles refine it: the sender measures round trips)."""
         if self._neg is not None:
             return self._neg.timeout
-        return self._mine.timeout
+        if self.config.timeout is not None:
+            return self.config.timeout
+        return max(INIT_TIMEOUT, self._mine.timeout)
+
+    def _data_packet_length(self) -> int:
+        return self._neg.send_max_length if self._neg else 96
 
     def _retry_limit(self) -> int:
         return self._neg.retry_limit if self._neg else self.config.retry_limit
@@ -432,14 +488,16 @@ class KermitSide(abc.ABC):
         assert self._neg is not None
         return self._neg.receive_encoding.decode(field)
 
-    def _count_retry(self) -> bool:
-        """Count one more retry; on exceeding the limit abort and return False."""
-        self._retries += 1
-        limit = self._retry_limit()
-        if limit and self._retries > limit:
-            self.abort("Too many retries", message=f"too many retries ({limit}): the link is down")
-            return False
-        return True
+    def _give_up(self, what: str, tries: int, now: float) -> None:
+        """Send E "Too many retries" and fail, saying what failed and how."""
+        if not self._heard:
+            message = (
+                f"no answer at all: nothing came back from the peer in {now - self._started:.0f} s "
+                f"({what}, {tries} tries); is the other side running, on this line and rate?"
+            )
+        else:
+            message = f"too many retries: {what}, after {tries} tries"
+        self.abort("Too many retries", message=message)
 
     def _negotiate(self, theirs: bytes) -> None:
         peer = KermitInit.decode(theirs)

@@ -19,15 +19,18 @@ file's Z acknowledged (sending) or received in order after all its data
 
 from __future__ import annotations
 
+import datetime
 import logging
 import math
 import os
 import pathlib
+import shutil
 from collections.abc import Callable, Sequence
 from typing import BinaryIO
 
 import trio
 
+from ._attributes import AttributeReply, FileAttributes
 from ._core import (
     FileCompleted,
     FileData,
@@ -41,6 +44,11 @@ from ._core import (
 from ._params import KermitConfig
 from ._receiver import KermitReceiver
 from ._sender import KermitSender
+
+_DATE_FORMAT = "%Y%m%d %H:%M:%S"
+"""The A packet's date (C-Kermit's ``#`` attribute), local time."""
+_SPACE_MARGIN = 1 << 20
+"""Bytes kept free on the receiving file system besides the file itself."""
 
 __all__ = ["KermitTransferError", "kermit_receive", "kermit_send", "safe_file_name"]
 
@@ -164,7 +172,9 @@ async def kermit_send(
             path = pathlib.Path(p)
             f: BinaryIO = path.open("rb")
             handles.append(f)
-            files.append(OutgoingFile(path.name, os.fstat(f.fileno()).st_size, f))
+            st = os.fstat(f.fileno())
+            date = datetime.datetime.fromtimestamp(st.st_mtime).strftime(_DATE_FORMAT)
+            files.append(OutgoingFile(path.name, st.st_size, f, date))
         sender = KermitSender(files, config, trio.current_time())
         total = sum(f.size or 0 for f in files)
         discarded: list[str] = []
@@ -172,15 +182,18 @@ async def kermit_send(
         def handle(event: KermitEvent) -> None:
             (on_event or _log_event)(event)
             if isinstance(event, FileCompleted) and event.discarded:
-                discarded.append(event.name)
+                why = f" ({event.reason})" if event.reason else ""
+                discarded.append(event.name + why)
 
         def progress(stats: KermitStatistics) -> str:
-            unacked = stats.file_bytes - stats.acknowledged_bytes
+            held = stats.resumed_bytes
+            unacked = stats.file_bytes - (stats.acknowledged_bytes - held)
             return (
                 f"the receiver confirmed {stats.files - len(discarded)} of {len(files)} "
                 f"files whole; of {total} bytes, {stats.acknowledged_bytes} were acknowledged, "
                 f"{unacked} sent but not acknowledged, "
-                f"{max(total - stats.file_bytes, 0)} never sent"
+                f"{max(total - stats.file_bytes - held, 0)} never sent"
+                + (f", {held} already held by the receiver (recovery)" if held else "")
             )
 
         await _run(port, sender, handle, progress)
@@ -208,7 +221,11 @@ async def kermit_receive(
 
     File names are reduced with :func:`safe_file_name`; an existing file of
     the same name is replaced when the new one is complete.  A file the
-    sender discards (Z with ``D``) is deleted.
+    sender discards (Z with ``D``) is deleted.  From the A packet: a file
+    that does not fit the free space is refused (``N1``), the date becomes
+    the file's modification time, and a RESEND is answered with the bytes
+    already held in ``NAME.part`` (or, failing that, in ``NAME``: a partial
+    file another Kermit left), which are then kept and appended to.
 
     Returns:
         The final counters, once the batch ended normally (B, in order after
@@ -217,69 +234,131 @@ async def kermit_receive(
     Raises:
         OSError: ``directory`` is not a directory.
         KermitTransferError: the transfer failed (the partial file stays as
-            ``NAME.part``), a file could not be stored, or the sender
-            discarded a file; the message says how many files were stored.
+            ``NAME.part``, ready for a RESEND), a file could not be stored, or
+            the sender discarded a file; the message says how many files were
+            stored.
     """
     config = config or KermitConfig()
     target = pathlib.Path(directory)
     if not target.is_dir():
         raise NotADirectoryError(f"{target} is not a directory: create it or pick another")
-    receiver = KermitReceiver(config, trio.current_time())
-    current: list[tuple[BinaryIO, pathlib.Path, pathlib.Path]] = []
-    stored: list[str] = []
-    discarded: list[str] = []
-    written = [0]  # bytes of the file in progress
+    store = _Store(target)
+    receiver = KermitReceiver(config, trio.current_time(), policy=store.decide)
 
     def handle(event: KermitEvent) -> None:
         (on_event or _log_event)(event)
-        if isinstance(event, FileStarted):
-            final = target / safe_file_name(event.name)
-            part = final.with_name(final.name + ".part")
-            try:
-                current.append((part.open("wb"), part, final))
-                written[0] = 0
-            except OSError as exc:
-                receiver.abort("Cannot create file", message=f"cannot create {part}: {exc}")
-        elif isinstance(event, FileData) and current:
-            try:
-                current[-1][0].write(event.data)
-                written[0] += len(event.data)
-            except OSError as exc:
-                receiver.abort("Cannot write file", message=f"cannot write {current[-1][1]}: {exc}")
-        elif isinstance(event, FileCompleted) and current:
-            f, part, final = current[-1]
-            try:
-                f.close()
-                if event.discarded:
-                    part.unlink()
-                else:
-                    part.replace(final)
-            except OSError as exc:
-                # Before the ACK of Z leaves (_run): the abort drops it.
-                receiver.abort("Cannot store file", message=f"cannot store {final}: {exc}")
-                return
-            current.pop()
-            (discarded if event.discarded else stored).append(final.name)
-
-    def progress(stats: KermitStatistics) -> str:
-        text = f"{len(stored)} files stored whole"
-        if current:
-            text += f"; {written[0]} bytes of the file in progress kept in {current[-1][1]}"
-        return text
+        try:
+            store.on_event(event, receiver.attributes)
+        except OSError as exc:
+            # Before the ACK of Z leaves (_run): the abort drops it.
+            receiver.abort("Cannot store file", message=f"cannot store {store.final}: {exc}")
 
     try:
-        await _run(port, receiver, handle, progress)
+        await _run(port, receiver, handle, store.progress)
     finally:
-        for f, _, _ in current:
-            f.close()
+        store.close()
     stats = receiver.statistics()
-    if discarded:
+    if store.discarded:
         raise KermitTransferError(
-            f"the sender cancelled {', '.join(discarded)} (deleted); {progress(stats)}",
+            f"the sender cancelled {', '.join(store.discarded)} (deleted); {store.progress(stats)}",
             by_peer=True,
             statistics=stats,
         )
     return stats
+
+
+class _Store:
+    """The receiver's file side: NAME.part while a file arrives, NAME once it is whole.
+
+    The part file is opened at the first data (or at the end, for an empty
+    file), not at the F packet: a RESEND's A packet must find the bytes a
+    previous attempt left before anything truncates them.
+    """
+
+    def __init__(self, target: pathlib.Path) -> None:
+        self.target = target
+        self.final = target
+        self.part = target
+        self.file: BinaryIO | None = None
+        self.append = False
+        self.written = 0
+        self.active = False
+        self.stored: list[str] = []
+        self.discarded: list[str] = []
+
+    def decide(self, name: str, attributes: FileAttributes) -> AttributeReply:
+        """The A packet's policy (see :class:`KermitReceiver`)."""
+        self._paths(name)
+        held = 0
+        if attributes.disposition == "R":
+            if not self.part.exists() and self.final.is_file():
+                self.final.replace(self.part)  # another Kermit's partial file
+            held = self.part.stat().st_size if self.part.is_file() else 0
+            if attributes.size is not None and held > attributes.size:
+                held = 0  # not a prefix of this file: start again
+            self.append = held > 0
+        if attributes.size is not None:
+            free = shutil.disk_usage(self.target).free
+            if attributes.size - held + _SPACE_MARGIN > free:
+                return AttributeReply(refuse="1")
+        return AttributeReply(resume_from=held if attributes.disposition == "R" else None)
+
+    def _paths(self, name: str) -> None:
+        self.final = self.target / safe_file_name(name)
+        self.part = self.final.with_name(self.final.name + ".part")
+
+    def _open(self) -> BinaryIO:
+        if self.file is None:
+            self.file = self.part.open("ab" if self.append else "wb")
+            if self.append:
+                self.written = self.file.tell()
+        return self.file
+
+    def on_event(self, event: KermitEvent, attributes: FileAttributes) -> None:
+        """Store what the receiver reports (raises OSError when the disk fails)."""
+        if isinstance(event, FileStarted):
+            self._paths(event.name)
+            self.file, self.append, self.written, self.active = None, False, 0, True
+        elif isinstance(event, FileData) and self.active:
+            self._open().write(event.data)
+            self.written += len(event.data)
+        elif isinstance(event, FileCompleted) and self.active:
+            f = self._open()
+            f.close()
+            self.file = None
+            if event.discarded:
+                self.part.unlink()
+                self.discarded.append(self.final.name)
+            else:
+                self.part.replace(self.final)
+                self._set_date(attributes.date)
+                self.stored.append(self.final.name)
+            self.active = False
+
+    def _set_date(self, date: str | None) -> None:
+        """The A packet's date as the modification time (ignored when malformed)."""
+        if not date:
+            return
+        try:
+            when = datetime.datetime.strptime(date[:17], _DATE_FORMAT)
+        except ValueError:
+            try:
+                when = datetime.datetime.strptime(date[:8], "%Y%m%d")
+            except ValueError:
+                return
+        stamp = when.timestamp()
+        os.utime(self.final, (stamp, stamp))
+
+    def progress(self, stats: KermitStatistics) -> str:
+        text = f"{len(self.stored)} files stored whole"
+        if self.active:
+            text += f"; {self.written} bytes of the file in progress kept in {self.part}"
+        return text
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
 
 
 def _log_event(event: KermitEvent) -> None:

@@ -37,8 +37,21 @@ from serialsocket._wire import (
 
 __all__ = ["KermitConfig", "KermitInit", "KermitNegotiated", "negotiate_kermit"]
 
-_CAP_LONG, _CAP_WINDOWS, _CAP_ATTRIBUTES = 2, 4, 8
+_CAP_LONG, _CAP_WINDOWS, _CAP_ATTRIBUTES, _CAP_RESEND = 2, 4, 8, 16
 _WHATAMI_VALID, _WHATAMI_BINARY = 32, 2
+_ASSUMED_RATE = 9600
+"""bit/s the timers assume when the line rate is not given (the port's default rate)."""
+_BITS_PER_CHAR = 10
+"""Start bit, 8 data bits, stop bit."""
+_ACK_CHARS = 12
+"""A long ACK with a CRC and EOL, padding aside: the reverse traffic per D packet."""
+_TIMER_MARGIN = 1.0
+"""Seconds added to every line-derived timeout: process start-up, scheduling, a pty's buffering."""
+MIN_TIMEOUT = 2.0
+"""The shortest timeout ever used, s (C-Kermit's dynamic timers stop at 1 s; a pty relay
+in a busy process needs a little more)."""
+INIT_TIMEOUT = 5.0
+"""The shortest wait for the answer to S (or for S): the other side may still be starting."""
 _NORMAL_PACKET = MAX_NORMAL_LEN + 2
 """96: the longest normal packet, MARK through CHECK (LEN = 94)."""
 _ADVERTISED_MAXL = MAX_NORMAL_LEN - 5
@@ -50,8 +63,23 @@ which no Kermit can read (ckwin #559).  Asking for at most 89 keeps its packets
 legal; our parser accepts the extra characters (see _PARSER_SLACK)."""
 MAX_KERMIT_WINDOW = 31
 """The window field is one tochar; 31 is the protocol's limit (E-Kermit P_WSLOTS, ckcker.h)."""
-_DEFAULT_PEER_TIMEOUT = 7.0
-"""Seconds we use when neither --timeout nor the peer's TIME says otherwise (G-Kermit's TIME)."""
+
+
+def line_time(chars: int, rate: int | None) -> float:
+    """Seconds ``chars`` characters take on the line (``rate`` bit/s, None: assumed 9600)."""
+    return chars * _BITS_PER_CHAR / (rate or _ASSUMED_RATE)
+
+
+def line_timeout(delay: float, rate: int | None, window: int, length: int) -> float:
+    """The timeout a line of this delay and rate needs, before anything is measured.
+
+    A resent packet may queue behind a whole window of packets already handed
+    to the port, and its ACK comes back through the delay: one round trip plus
+    the line time of ``window`` packets of ``length`` characters and their
+    ACKs, plus :data:`_TIMER_MARGIN`; never below :data:`MIN_TIMEOUT`.
+    """
+    busy = line_time(window * (length + _ACK_CHARS), rate)
+    return max(MIN_TIMEOUT, 2 * delay + busy + _TIMER_MARGIN)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -65,15 +93,33 @@ class KermitConfig:
         window: sliding-window slots we offer, 1..31.
         check: block check we ask for after the Send-Init exchange (type 1, 2
             or 3; both sides must ask for the same, else type 1 is used).
-        timeout: fixed local timeout in seconds, or None to use the time the
-            peer asks for in its TIME field.  On delayed links set it above the
-            round trip of a full window.
+        timeout: fixed local timeout in seconds, or None for timers derived
+            from the line (``delay``, ``rate``) and then from measured round
+            trips (see :func:`line_timeout`).
+        delay: one-way delay of the line, s (a hint for the timers and for
+            the packet length; never a truth the transfer breaks on).
+        rate: line rate in bit/s, or None (timers assume 9600).
+        dynamic_length: the sender chooses the length of its D packets from
+            the line and the errors it measures, up to ``max_packet_length``;
+            False: always the longest the receiver accepts.
         retry_limit: retransmissions of one packet before giving up with an E
             packet; 0 means no limit.  Raised to window + 1 when smaller, as
             C-Kermit and E-Kermit do.
         seven_bit: the line carries 7 bits only: ask for 8th-bit prefixing.
         repeat: offer repeat-count compression (``~``).
-        attributes: offer attribute (A) packets (file size, binary type).
+        attributes: offer attribute (A) packets (size, type, date, disposition).
+        recovery: offer the RESEND capability (CAPAS 16); a receiver then
+            answers a RESEND with the bytes it already holds.
+        resend: the sender asks, for each file, how much the receiver holds
+            and sends only the rest (C-Kermit's RESEND; binary files only;
+            needs ``recovery`` on both sides).
+        text: the sender sends files as text: LF line ends become CRLF on the
+            wire and the A packet says ``AMJ``.  A receiver always follows
+            the type the A packet announces.
+        literal_names: send file names as they are and store them as they
+            come; otherwise names go out in common form (upper case, one dot)
+            and names that arrive in upper case are stored in lower case, as
+            C-Kermit and G-Kermit do by default.
     """
 
     max_packet_length: int = 1000
@@ -84,6 +130,13 @@ class KermitConfig:
     seven_bit: bool = False
     repeat: bool = True
     attributes: bool = True
+    delay: float = 0.0
+    rate: int | None = None
+    dynamic_length: bool = True
+    recovery: bool = True
+    resend: bool = False
+    text: bool = False
+    literal_names: bool = False
 
     def __post_init__(self) -> None:
         if not MIN_PACKET_LENGTH <= self.max_packet_length <= MAX_PACKET_LENGTH:
@@ -97,6 +150,16 @@ class KermitConfig:
             raise LocalProtocolError(f"timeout {self.timeout} s must be > 0 and below a day")
         if self.retry_limit < 0:
             raise LocalProtocolError("retry limit must be >= 0 (0 = no limit)")
+        if not 0 <= self.delay < 86400:
+            raise LocalProtocolError(f"delay {self.delay} s must be >= 0 and below a day")
+        if self.rate is not None and self.rate <= 0:
+            raise LocalProtocolError(f"line rate {self.rate} bit/s must be > 0")
+
+    def initial_timeout(self) -> float:
+        """The timeout before anything is measured (``timeout`` when fixed)."""
+        if self.timeout is not None:
+            return self.timeout
+        return line_timeout(self.delay, self.rate, self.window, self.max_packet_length)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -112,7 +175,7 @@ class KermitInit:
         qbin: ``Y``, ``N`` or the 8th-bit prefix this side wants.
         check: block check this side asks for (1, 2 or 3).
         rept: repeat prefix proposed, or None.
-        long_packets, windows, attributes: CAPAS bits.
+        long_packets, windows, attributes, recovery: CAPAS bits.
         window: window slots offered (1 without the windows capability).
     """
 
@@ -129,6 +192,7 @@ class KermitInit:
     windows: bool
     attributes: bool
     window: int
+    recovery: bool = False
 
     @classmethod
     def mine(cls, config: KermitConfig) -> KermitInit:
@@ -136,7 +200,7 @@ class KermitInit:
         long_packets = config.max_packet_length > _NORMAL_PACKET
         return cls(
             max_packet_length=config.max_packet_length,
-            timeout=config.timeout if config.timeout is not None else _DEFAULT_PEER_TIMEOUT,
+            timeout=config.initial_timeout(),
             npad=0,
             padc=0,
             eol=0x0D,
@@ -148,6 +212,7 @@ class KermitInit:
             windows=config.window > 1,
             attributes=config.attributes,
             window=config.window,
+            recovery=config.recovery and config.attributes,
         )
 
     def encode(self) -> bytes:
@@ -156,6 +221,7 @@ class KermitInit:
             (_CAP_LONG if self.long_packets else 0)
             | (_CAP_WINDOWS if self.windows else 0)
             | (_CAP_ATTRIBUTES if self.attributes else 0)
+            | (_CAP_RESEND if self.recovery else 0)
         )
         n = min(self.max_packet_length - 7, 94 * 95 + 94)
         return bytes(
@@ -221,6 +287,7 @@ class KermitInit:
             windows=caps >= 0 and bool(caps & _CAP_WINDOWS),
             attributes=caps >= 0 and bool(caps & _CAP_ATTRIBUTES),
             window=common.window,
+            recovery=caps >= 0 and bool(caps & _CAP_RESEND),
         )
 
 
@@ -236,7 +303,11 @@ class KermitNegotiated:
         send_encoding: prefixes we use (our QCTL, the agreed QBIN and REPT).
         receive_encoding: prefixes the peer uses (its QCTL).
         attributes: both sides do A packets.
-        timeout: our timeout, seconds (local override, else the peer's TIME).
+        recovery: both sides do RESEND (CAPAS 16, with attributes).
+        timeout: our timeout before anything is measured, s: the fixed one,
+            else the line's (:func:`line_timeout`; a receiver also waits at
+            least the peer's TIME).
+        peer_time: the peer's TIME field, s (0: none).
         retry_limit: retries per packet, 0 = unlimited.
         eol, padding: what to put after and before each packet we send.
     """
@@ -247,7 +318,9 @@ class KermitNegotiated:
     send_encoding: Encoding
     receive_encoding: Encoding
     attributes: bool
+    recovery: bool
     timeout: float
+    peer_time: float
     retry_limit: int
     eol: int
     padding: bytes
@@ -292,17 +365,20 @@ def negotiate_kermit(
     retry_limit = config.retry_limit
     if retry_limit and retry_limit < window + 1:
         retry_limit = window + 1
+    send_max = max(MIN_PACKET_LENGTH, min(config.max_packet_length, peer_max))
     timeout = config.timeout
     if timeout is None:
-        timeout = theirs.timeout if theirs.timeout > 0 else _DEFAULT_PEER_TIMEOUT
+        timeout = line_timeout(config.delay, config.rate, window, max(send_max, 96))
     return KermitNegotiated(
-        send_max_length=max(MIN_PACKET_LENGTH, min(config.max_packet_length, peer_max)),
+        send_max_length=send_max,
         window=window,
         check=check,
         send_encoding=send_encoding,
         receive_encoding=receive_encoding,
         attributes=mine.attributes and theirs.attributes,
+        recovery=mine.recovery and theirs.recovery and mine.attributes and theirs.attributes,
         timeout=timeout,
+        peer_time=theirs.timeout,
         retry_limit=retry_limit,
         eol=theirs.eol,
         padding=bytes([theirs.padc]) * theirs.npad,

@@ -6,10 +6,20 @@ are in :mod:`serialsocket.kermit._core`; this module is the receiving role.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from serialsocket._errors import RemoteProtocolError
 from serialsocket._packet import Packet
 from serialsocket._wire import SEQ_MODULUS, PacketType
 
+from ._attributes import (
+    AttributeReply,
+    FileAttributes,
+    TextDecoder,
+    encode_reply,
+    local_form,
+    parse_attributes,
+)
 from ._core import (
     FileCompleted,
     FileData,
@@ -18,8 +28,19 @@ from ._core import (
     KermitState,
     TransferComplete,
 )
-from ._params import KermitConfig
+from ._params import INIT_TIMEOUT, KermitConfig, line_timeout
 from ._window import ReceiveWindow
+
+AttributePolicy = Callable[[str, FileAttributes], AttributeReply]
+"""Decides on an incoming file from its (stored) name and attributes: accept,
+refuse, or -- for a RESEND -- say how many bytes are already held.  The
+caller's code (it may look at the disk); the core only calls it."""
+
+
+def accept_all(name: str, attributes: FileAttributes) -> AttributeReply:
+    """The default policy: every file accepted, nothing held for a RESEND."""
+    return AttributeReply(resume_from=0 if attributes.disposition == "R" else None)
+
 
 __all__ = ["KermitReceiver"]
 
@@ -29,21 +50,47 @@ class KermitReceiver(KermitSide):
 
     Emits :class:`FileStarted`, :class:`FileData` (in order),
     :class:`FileCompleted` per file, then :class:`TransferComplete`; the
-    caller stores the bytes.  File names arrive as the peer sent them: the
-    caller must sanitise them before using them as paths.
+    caller stores the bytes.  File names arrive as the peer sent them,
+    lower-cased when they came in upper case (unless ``literal_names``):
+    the caller must sanitise them before using them as paths.  A file the A
+    packet calls text has its CR LF record ends turned into LF.
 
     Args:
         config: local settings.
         now: the current time (starts the wait for S).
+        policy: decides on each file from its A packet (see
+            :data:`AttributePolicy`); default :func:`accept_all`.
     """
 
-    def __init__(self, config: KermitConfig, now: float) -> None:
+    def __init__(
+        self, config: KermitConfig, now: float, *, policy: AttributePolicy | None = None
+    ) -> None:
         super().__init__(config, KermitState.RECEIVE_INIT)
         self._window = ReceiveWindow(1, 0)
         self._acks: dict[int, bytes] = {}  # last ACK sent per sequence number (bounded: 64)
         self._name = ""
         self._size: int | None = None
+        self._policy = policy or accept_all
+        self._text: TextDecoder | None = None
+        self._attributes = FileAttributes()
+        self._started = now
         self._deadline = now + self._timeout()
+
+    @property
+    def attributes(self) -> FileAttributes:
+        """The current (or last) file's attributes, as its A packet gave them."""
+        return self._attributes
+
+    def _timeout(self) -> float:
+        """Wait for the sender's packets: the line's time for a window of our
+        longest packets, at least the peer's TIME (what it asked us to wait)."""
+        config, neg = self.config, self._neg
+        if config.timeout is not None:
+            return config.timeout
+        if neg is None:
+            return max(INIT_TIMEOUT, self._mine.timeout)
+        line = line_timeout(config.delay, config.rate, neg.window, config.max_packet_length)
+        return max(line, neg.peer_time)
 
     def _error_seq(self) -> int:
         return self._window.low
@@ -81,9 +128,9 @@ class KermitReceiver(KermitSide):
             # "the batch is done" (the sender then exits).  A Z that overtook
             # a missing D waits, unacknowledged, for the D's retransmission.
             while not self.finished and (ready := window.pop_ready()) is not None:
-                if ready.type != PacketType.DATA:
-                    self._ack(ready.seq)
-                self._deliver(ready)
+                reply = self._deliver(ready)
+                if ready.type != PacketType.DATA and self._state is not KermitState.FAILED:
+                    self._ack(ready.seq, reply)
             if not self.finished and (gap := window.gap_to_nak()) is not None:
                 window.naked(gap)
                 self._nak(gap)
@@ -99,12 +146,15 @@ class KermitReceiver(KermitSide):
         self._retries = 0
         self._deadline = now + self._timeout()
 
-    def _deliver(self, packet: Packet) -> None:
-        """Act on the next in-order packet."""
+    def _deliver(self, packet: Packet) -> bytes:
+        """Act on the next in-order packet; returns the data for its ACK."""
         ptype, state = packet.type, self._state
         if state is KermitState.RECEIVE_FILE and ptype == PacketType.FILE:
-            self._name = self._decode(packet.data).decode("utf-8", "replace")
+            name = self._decode(packet.data).decode("utf-8", "replace")
+            self._name = name if self.config.literal_names else local_form(name)
             self._size = None
+            self._text = None
+            self._attributes = FileAttributes()
             self._goto(KermitState.RECEIVE_DATA)
             self._events.append(FileStarted(self._name))
         elif state is KermitState.RECEIVE_FILE and ptype == PacketType.BREAK:
@@ -114,22 +164,48 @@ class KermitReceiver(KermitSide):
         elif state is KermitState.RECEIVE_DATA and ptype == PacketType.DATA:
             data = self._decode(packet.data)
             self._file_bytes += len(data)
+            if self._text is not None:
+                data = self._text.feed(data)
             if data:
                 self._events.append(FileData(data))
         elif state is KermitState.RECEIVE_DATA and ptype == PacketType.ATTRIBUTES:
-            self._size = _attribute_size(self._decode(packet.data))
+            return self._on_attributes(parse_attributes(self._decode(packet.data)))
         elif state is KermitState.RECEIVE_DATA and ptype == PacketType.EOF:
             discarded = self._decode(packet.data)[:1] == b"D"
+            if self._text is not None and (tail := self._text.flush()):
+                self._events.append(FileData(tail))
             self._files += 1
             self._goto(KermitState.RECEIVE_FILE)
             self._events.append(FileCompleted(self._name, discarded, self._size))
         elif ptype == PacketType.SEND_INIT:
-            return  # a late S copy inside the window: its ACK was already sent
+            pass  # a late S copy inside the window: its ACK was already sent
         else:
             raise RemoteProtocolError(
                 f"unexpected {ptype!r} packet in state {state.value}",
                 error_hint=f"Unexpected packet type {ptype}",
             )
+        return b""
+
+    def _on_attributes(self, attributes: FileAttributes) -> bytes:
+        """The A packet: ask the policy, and answer as C-Kermit's gattr() does."""
+        assert self._neg is not None
+        self._attributes = attributes
+        self._size = attributes.size
+        if attributes.disposition not in (None, "R"):
+            return encode_reply(AttributeReply(refuse="+"))  # mail, print: not here
+        if attributes.disposition == "R" and (attributes.text or not self._neg.recovery):
+            return encode_reply(AttributeReply(refuse="+"))  # RESEND is binary only
+        reply = self._policy(self._name, attributes)
+        if not reply.refuse:
+            if attributes.text:
+                self._text = TextDecoder()
+            if attributes.disposition == "R":
+                held = reply.resume_from or 0
+                self._resumed += held
+                reply = AttributeReply(resume_from=held)
+            else:
+                reply = AttributeReply()
+        return encode_reply(reply)
 
     def _on_damage(self, now: float) -> None:
         if self._state is KermitState.RECEIVE_INIT:
@@ -143,19 +219,15 @@ class KermitReceiver(KermitSide):
 
     def _on_timeout(self, now: float) -> None:
         self._deadline = now + self._timeout()
-        if not self._count_retry():
+        self._retries += 1
+        limit = self._retry_limit()
+        if limit and self._retries > limit:
+            what = (
+                "S never arrived"
+                if self._state is KermitState.RECEIVE_INIT
+                else f"packet {self._window.low} never arrived"
+            )
+            self._give_up(what, self._retries, now)
             return
         self._window.forget_naks()
         self._nak(self._window.low)
-
-
-def _attribute_size(field: bytes) -> int | None:
-    """The ``1`` (length in bytes) attribute of an A packet, if present and numeric."""
-    i = 0
-    while i + 1 < len(field):
-        tag, n = field[i], field[i + 1] - 32
-        value = field[i + 2 : i + 2 + max(n, 0)]
-        if tag == ord("1") and value.isdigit():
-            return int(value)
-        i += 2 + max(n, 0)
-    return None

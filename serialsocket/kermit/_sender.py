@@ -7,14 +7,16 @@ are in :mod:`serialsocket.kermit._core`; this module is the sending role.
 from __future__ import annotations
 
 import logging
+import math
 import zlib
 from collections import deque
 from collections.abc import Sequence
 from pathlib import PurePosixPath
 
 from serialsocket._packet import Packet, data_capacity
-from serialsocket._wire import SEQ_MODULUS, PacketType
+from serialsocket._wire import MAX_NORMAL_LEN, SEQ_MODULUS, PacketType
 
+from ._attributes import common_form, decode_reply, encode_attributes, refusal_text, to_crlf
 from ._core import (
     _BREAK_RETRIES,
     _READ_AHEAD,
@@ -25,8 +27,23 @@ from ._core import (
     OutgoingFile,
     TransferComplete,
 )
-from ._params import KermitConfig
+from ._params import INIT_TIMEOUT, MIN_TIMEOUT, KermitConfig, line_time, line_timeout
 from ._window import SendSlot, SendWindow
+
+_MIN_DYNAMIC_LENGTH = MAX_NORMAL_LEN + 2
+"""96: the dynamic length never goes below a normal packet."""
+_PACKET_OVERHEAD = 20
+"""Characters each D packet costs besides its data: 11 of framing, and its share
+of the ACK coming back (the model of :meth:`KermitSender._choose_length`)."""
+_PRIOR_CHARS = 2000.0
+_PRIOR_ERRORS = 0.5
+"""Before anything is measured the error estimate is 0.5 errors in 2000
+characters (2.5e-4 per character); measured characters and errors soon
+outweigh it."""
+_RTT_GAIN, _RTTVAR_GAIN = 0.125, 0.25
+"""RFC 6298's gains for the smoothed round trip and its variation."""
+_MAX_BACKOFF = 8
+"""Consecutive timeouts double the timeout up to this factor (reset by progress)."""
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +71,14 @@ class KermitSender(KermitSide):
         self._window = SendWindow(1)
         self._seq = 0
         self._transmissions = 0  # orders every copy sent, for the lost-copy rule
+        self._started = now
+        self._srtt: float | None = None
+        self._rttvar = 0.0
+        self._backoff = 1
+        self._length = 0  # current D packet length (0 until negotiated)
+        self._d_chars = 0.0  # D characters sent, resends included (error estimate)
+        self._d_errors = 0.0  # D packets resent (error estimate)
+        self._refusal: str | None = None
         self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
 
     def _error_seq(self) -> int:
@@ -69,8 +94,80 @@ class KermitSender(KermitSide):
         self._seq = (seq + 1) % SEQ_MODULUS
         self._transmissions += 1
         wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
-        self._window.push(seq, wire, self._transmissions, file_bytes)
+        if ptype == PacketType.DATA:
+            self._d_chars += len(wire)
+        self._window.push(seq, wire, self._transmissions, file_bytes, sent_at=now, ptype=str(ptype))
         self._deadline = now + self._timeout()
+
+    # -- timers and packet length ------------------------------------------------
+
+    def _timeout(self) -> float:
+        """Line-derived until round trips are measured, then RFC 6298's, with backoff.
+
+        Never below the line's own floor (one round trip of the configured
+        delay plus one packet and its ACK), nor :data:`MIN_TIMEOUT`.
+        """
+        config = self.config
+        if config.timeout is not None:
+            return config.timeout
+        neg = self._neg
+        if neg is None:
+            return max(INIT_TIMEOUT, self._mine.timeout) * self._backoff
+        length = self._length or neg.send_max_length
+        if self._srtt is None:
+            base = line_timeout(config.delay, config.rate, neg.window, length)
+        else:
+            floor = 2 * config.delay + line_time(length + 12, config.rate)
+            base = max(MIN_TIMEOUT, floor, self._srtt + 4 * self._rttvar)
+        return base * self._backoff
+
+    def _measure(self, slot: SendSlot, now: float) -> None:
+        """A round-trip sample from a packet sent once (Karn's rule)."""
+        if slot.retries:
+            return
+        sample = max(now - slot.sent_at, 0.0)
+        if self._srtt is None:
+            self._srtt, self._rttvar = sample, sample / 2
+        else:
+            self._rttvar += _RTTVAR_GAIN * (abs(self._srtt - sample) - self._rttvar)
+            self._srtt += _RTT_GAIN * (sample - self._srtt)
+
+    def _data_packet_length(self) -> int:
+        if self._neg is None:
+            return 96
+        return self._length or self._neg.send_max_length
+
+    def _choose_length(self) -> int:
+        """The D packet length with the best expected goodput on this line.
+
+        Model: a packet of L characters arrives whole with probability
+        (1 - p)^L, p being the measured per-character error rate (resent D
+        packets over D characters sent, with a small prior); goodput is
+        that times the data share (L - overhead) / L times the rate the
+        window allows -- the line rate, or a window of packets per round
+        trip when the round trip is longer (the configured delay, or the
+        measured one).  Candidates run from 96 to the negotiated maximum.
+        """
+        neg = self._neg
+        assert neg is not None
+        top = neg.send_max_length
+        if not self.config.dynamic_length or top <= _MIN_DYNAMIC_LENGTH:
+            return top
+        p = (self._d_errors + _PRIOR_ERRORS) / (self._d_chars + _PRIOR_CHARS)
+        cps = 1.0 / line_time(1, self.config.rate)
+        rtt = max(2 * self.config.delay, self._srtt or 0.0)
+        best, best_rate = _MIN_DYNAMIC_LENGTH, -1.0
+        length = float(_MIN_DYNAMIC_LENGTH)
+        while True:
+            n = min(int(length), top)
+            whole = math.exp(n * math.log1p(-min(p, 0.5)))
+            window_cps = neg.window * n / (rtt + n / cps) if rtt > 0 else cps
+            rate = whole * (n - _PACKET_OVERHEAD) / n * min(cps, window_cps)
+            if rate > best_rate:
+                best, best_rate = n, rate
+            if n >= top:
+                return best
+            length *= 1.15
 
     def _on_packet(self, packet: Packet, now: float) -> None:
         window = self._window
@@ -90,7 +187,9 @@ class KermitSender(KermitSide):
                     self._retransmit(oldest, now)
                 return  # otherwise an old duplicate ACK
             oldest = window.oldest()
+            self._measure(slot, now)
             window.ack(packet.seq)
+            self._backoff = 1
             self._deadline = now + self._timeout()
             if oldest is not None and slot.first_sent > oldest.last_sent:
                 # Every copy of the packet just ACKed left after window-low's
@@ -134,6 +233,11 @@ class KermitSender(KermitSide):
             self._negotiate(ack.data)
             assert self._neg is not None
             self._window = SendWindow(self._neg.window)
+            self._length = self._choose_length()
+            if self.config.resend and not self._neg.recovery:
+                log.warning(
+                    "the receiver cannot recover (no RESEND capability): files are sent whole"
+                )
             self._next_file(now)
         elif state is KermitState.SEND_FILE:
             if self._neg is not None and self._neg.attributes:
@@ -143,13 +247,17 @@ class KermitSender(KermitSide):
                 self._goto(KermitState.SEND_DATA)
                 self._fill(now)
         elif state is KermitState.SEND_ATTRIBUTES:
-            if ack is not None and ack.data[:1] == b"N":
+            reply = decode_reply(ack.data if ack is not None else b"")
+            if reply.refuse:
                 self._discard = True  # the receiver refused the file
+                self._refusal = refusal_text(reply.refuse)
                 self._goto(KermitState.SEND_EOF)
                 self._send(PacketType.EOF, b"D", now)
-            else:
-                self._goto(KermitState.SEND_DATA)
-                self._fill(now)
+                return
+            if reply.resume_from and self._resending():
+                self._resume(reply.resume_from)
+            self._goto(KermitState.SEND_DATA)
+            self._fill(now)
         elif state is KermitState.SEND_DATA:
             if ack is not None and ack.data[:1] in (b"X", b"Z"):
                 self._discard = True  # receiver cancelled the file (X) or batch (Z)
@@ -159,7 +267,7 @@ class KermitSender(KermitSide):
         elif state is KermitState.SEND_EOF:
             assert self._file is not None
             self._files += 1
-            self._events.append(FileCompleted(self._file.name, self._discard))
+            self._events.append(FileCompleted(self._file.name, self._discard, reason=self._refusal))
             self._next_file(now)
         elif state is KermitState.SEND_BREAK:
             self._goto(KermitState.DONE)
@@ -174,11 +282,29 @@ class KermitSender(KermitSide):
         self._file = self._files_left.popleft()
         self._pending.clear()
         self._eof = self._discard = False
+        self._refusal = None
         self._goto(KermitState.SEND_FILE)
         assert self._neg is not None
         capacity = data_capacity(self._neg.send_max_length, self._neg.check)
-        self._send(PacketType.FILE, self._file_name(self._file.name, capacity), now)
+        name = self._file.name if self.config.literal_names else common_form(self._file.name)
+        self._send(PacketType.FILE, self._file_name(name, capacity), now)
         self._events.append(FileStarted(self._file.name))
+
+    def _resending(self) -> bool:
+        """This file goes with RESEND: asked for, negotiated, binary."""
+        neg = self._neg
+        return bool(self.config.resend and neg and neg.recovery and not self.config.text)
+
+    def _resume(self, offset: int) -> None:
+        """The receiver holds ``offset`` bytes already: start there (C-Kermit's rsattr())."""
+        file = self._file
+        assert file is not None
+        if file.size is not None:
+            offset = min(offset, file.size)
+        file.source.seek(offset)
+        self._resumed += offset
+        # Bytes the receiver held before count as acknowledged, not as sent.
+        self._window.acknowledged_bytes += offset
 
     def _file_name(self, name: str, capacity: int) -> bytes:
         """``name`` encoded for the F packet, shortened to fit ``capacity`` if need be.
@@ -222,13 +348,15 @@ class KermitSender(KermitSide):
         return encoded(short)[:capacity]  # only a capacity under 5 bytes can cut the tag
 
     def _attributes(self) -> bytes:
-        """A packet: ``"`` type = binary 8-bit, ``1`` = length in bytes when known."""
+        """A packet: type, date, size (K and bytes), RESEND disposition, end."""
         assert self._file is not None
         assert self._neg is not None
-        fields = b'"' + bytes([32 + 2]) + b"B8"
-        if self._file.size is not None:
-            size = str(self._file.size).encode()
-            fields += b"1" + bytes([32 + len(size)]) + size
+        fields = encode_attributes(
+            size=self._file.size,
+            text=self.config.text,
+            date=self._file.date,
+            resend=self._resending(),
+        )
         return self._neg.send_encoding.encode(fields)
 
     def _fill(self, now: float) -> None:
@@ -236,12 +364,13 @@ class KermitSender(KermitSide):
         assert self._neg is not None
         assert self._file is not None
         neg = self._neg
-        capacity = data_capacity(neg.send_max_length, neg.check)
+        self._length = self._choose_length()
+        capacity = data_capacity(self._length, neg.check)
         while not self._window.full and not self._discard:
             if len(self._pending) < capacity and not self._eof:
                 chunk = self._file.source.read(capacity * _READ_AHEAD)
                 if chunk:
-                    self._pending += chunk
+                    self._pending += to_crlf(chunk) if self.config.text else chunk
                 else:
                     self._eof = True
             if not self._pending:
@@ -269,6 +398,7 @@ class KermitSender(KermitSide):
         if self._state is KermitState.SEND_BREAK and slot and slot.retries >= _BREAK_RETRIES:
             self._break_unacknowledged()
         else:
+            self._backoff = min(self._backoff * 2, _MAX_BACKOFF)
             self._retransmit_oldest(now)
 
     def _break_unacknowledged(self) -> None:
@@ -287,8 +417,13 @@ class KermitSender(KermitSide):
         """Resend one packet, or give up once it has used up its retries."""
         limit = self._retry_limit()
         if limit and slot.retries >= limit:
-            self.abort("Too many retries", message=f"too many retries ({limit}): the link is down")
+            self._give_up(
+                f"packet {slot.seq} ({slot.ptype}) was never acknowledged", slot.retries + 1, now
+            )
             return
+        if slot.ptype == PacketType.DATA:
+            self._d_errors += 1
+            self._d_chars += len(slot.wire)
         slot.retries += 1
         self._transmissions += 1
         slot.last_sent = self._transmissions

@@ -33,6 +33,9 @@ class SendSlot:
         retries: retransmissions so far.
         acked: an ACK arrived (the slot stays until every older slot is acked).
         file_bytes: file bytes this packet carries (D packets; 0 for the others).
+        sent_at: when its first copy was handed out (for round-trip samples:
+            only packets sent once are measured, Karn's rule).
+        ptype: its type letter (for error messages).
     """
 
     seq: int
@@ -42,6 +45,8 @@ class SendSlot:
     retries: int = 0
     acked: bool = False
     file_bytes: int = 0
+    sent_at: float = 0.0
+    ptype: str = "D"
 
 
 class SendWindow:
@@ -65,9 +70,20 @@ class SendWindow:
         """No room for another packet."""
         return len(self._slots) >= self.size
 
-    def push(self, seq: int, wire: bytes, sent: int, file_bytes: int = 0) -> None:
+    def push(
+        self,
+        seq: int,
+        wire: bytes,
+        sent: int,
+        file_bytes: int = 0,
+        *,
+        sent_at: float = 0.0,
+        ptype: str = "D",
+    ) -> None:
         """Record a newly sent packet, ``sent`` being its transmission number."""
-        self._slots[seq] = SendSlot(seq, wire, sent, sent, file_bytes=file_bytes)
+        self._slots[seq] = SendSlot(
+            seq, wire, sent, sent, file_bytes=file_bytes, sent_at=sent_at, ptype=ptype
+        )
 
     def get(self, seq: int) -> SendSlot | None:
         """The outstanding slot with this sequence number, if any."""

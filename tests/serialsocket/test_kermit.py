@@ -42,16 +42,18 @@ Side = KermitSender | KermitReceiver
 
 
 def test_our_send_init_field_is_exact() -> None:
-    # MAXL 89 'y', TIME 7, no padding, EOL CR, '#', QBIN Y, CHKT 3, REPT '~',
-    # CAPAS 2|4|8 '.', WINDO 8 '(', MAXLX 993 = 10*95+43 '*K', CHKPNT 0,
-    # CHKINT ___, WHATAMI tochar(32|2) 'B'.
-    assert KermitInit.mine(KermitConfig()).encode() == b"y' @-#Y3~.(*K0___B"
+    # MAXL 89 'y', TIME 9 (a window of 8 x 1000 characters at an assumed
+    # 9600 bit/s, 8.4 s, plus 1 s), no padding, EOL CR, '#', QBIN Y, CHKT 3,
+    # REPT '~', CAPAS 2|4|8|16 '>', WINDO 8 '(', MAXLX 993 = 10*95+43 '*K',
+    # CHKPNT 0, CHKINT ___, WHATAMI tochar(32|2) 'B'.
+    assert KermitInit.mine(KermitConfig()).encode() == b"y) @-#Y3~>(*K0___B"
 
 
 def test_seven_bit_normal_packets_field() -> None:
     config = KermitConfig(max_packet_length=94, window=1, seven_bit=True, repeat=False)
-    # MAXL 89 (C-Kermit overshoot margin), QBIN '&', REPT blank, CAPAS 8 only, WINDO 1.
-    assert KermitInit.mine(config).encode() == b"y' @-#&3 (! w0___B"
+    # MAXL 89 (C-Kermit overshoot margin), TIME 2 (the floor), QBIN '&',
+    # REPT blank, CAPAS 8|16 (attributes, RESEND), WINDO 1.
+    assert KermitInit.mine(config).encode() == b'y" @-#&3 8! w0___B'
 
 
 def test_decode_gkermit_send_init() -> None:
@@ -79,7 +81,10 @@ def test_negotiate_with_ckermit_and_gkermit() -> None:
     config = KermitConfig()
     mine = KermitInit.mine(config)
     ck = negotiate_kermit(config, mine, KermitInit.decode(b'~/ @-#Y3~^(J)0___F"U1@'))
-    assert (ck.window, ck.send_max_length, ck.check, ck.timeout) == (8, 1000, BlockCheck.CRC16, 15)
+    assert (ck.window, ck.send_max_length, ck.check) == (8, 1000, BlockCheck.CRC16)
+    assert ck.timeout == pytest.approx(1 + 8 * 1012 * 10 / 9600)  # the line's, not the peer's
+    assert ck.peer_time == 15
+    assert ck.recovery  # C-Kermit's CAPAS '^' has RESEND
     assert ck.send_encoding.qbin is None
     assert ck.send_encoding.rept == ord("~")
     gk = negotiate_kermit(config, mine, KermitInit.decode(b"~' @-#Y3~*!J*0+++B\"U1A"))
@@ -229,11 +234,11 @@ def test_several_files_and_an_empty_one() -> None:
 
 
 def test_sender_gives_up_after_the_retry_limit_with_an_e_packet() -> None:
-    sender = KermitSender([], KermitConfig(retry_limit=3), 0.0)
+    sender = KermitSender([], KermitConfig(retry_limit=3, timeout=7.0), 0.0)
     first = sender.data_to_send()
     assert first.startswith(b"\x01")
     assert first[3:4] == b"S"
-    assert sender.get_timer() == 7.0  # no --timeout and no peer TIME yet: 7 s
+    assert sender.get_timer() == 7.0  # a fixed --timeout: no backoff
     for k in range(1, 4):
         sender.handle_timer(7.0 * k)
         assert sender.data_to_send() == first  # the same S, byte for byte
@@ -242,7 +247,9 @@ def test_sender_gives_up_after_the_retry_limit_with_an_e_packet() -> None:
     error = build_packet(Packet(seq=1, type="E", data=b"Too many retries"), BlockCheck.SUM6)
     assert sender.data_to_send() == error
     assert sender.next_event() == TransferFailed(
-        "too many retries (3): the link is down", by_peer=False
+        "no answer at all: nothing came back from the peer in 28 s (packet 0 (S) was never "
+        "acknowledged, 4 tries); is the other side running, on this line and rate?",
+        by_peer=False,
     )
     assert sender.get_timer() is None
     assert sender.state is KermitState.FAILED
@@ -365,7 +372,9 @@ def test_cli_rejects_a_bad_packet_length(capsys: pytest.CaptureFixture[str]) -> 
     with pytest.raises(SystemExit) as info:
         cli_main(argv)
     assert info.value.code == 2
-    assert "argument --packet-length: must be an integer in 12..9031" in capsys.readouterr().err
+    assert "argument --packet-length/--max-len: must be an integer in 12..9031" in (
+        capsys.readouterr().err
+    )
 
 
 def test_cli_reports_a_port_that_cannot_be_opened(

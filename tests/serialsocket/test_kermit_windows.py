@@ -177,7 +177,8 @@ def test_a_packet_that_never_arrives_ends_in_failure_saying_what_was_acknowledge
     sent = stats.file_bytes
     assert len(script.file()) < sent < SIZE
     assert str(result) == (
-        f"too many retries (9): the link is down; the receiver confirmed 0 of 1 files whole; "
+        f"too many retries: packet 3 (D) was never acknowledged, after 10 tries; "
+        f"the receiver confirmed 0 of 1 files whole; "
         f"of {SIZE} bytes, {first} were acknowledged, {sent - first} sent but not "
         f"acknowledged, {SIZE - sent} never sent"
     )
