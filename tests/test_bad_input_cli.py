@@ -274,6 +274,8 @@ FREE_TEXT = {
     "plot_ber": "bench goodput: a PNG written",
     "write_config": "relay --write-config: a file written (never over one), exit 1",
     "write_world": "arm-server --write-world: a file written (never over one), exit 1",
+    "task": "console/control --task rock|FILE: parsed and previewed before anything runs, "
+    "exit 2 (tests/linksim/test_taskfile.py)",
 }
 
 INT_RANGES = (link_args.IntRange, serial_args.IntRange)
@@ -537,6 +539,8 @@ RUNTIME_CASES = [
         False,
     ),
     (["linksim", "demo", "--virtual", "--world", "/nonexistent.toml"], 2, "nonexistent", False),
+    (["linksim", "control", "--virtual", "--task", "/no/such.toml"], 2, "/no/such.toml", False),
+    (["linksim", "console", "--virtual", "--task", "wave"], 2, "ends in .toml or .json", False),
     # Options that would be ignored are refused with the reason.
     (["linksim", "demo", "--virtual", "--dial", "5551234"], 2, "cannot run with --virtual", False),
     (["linksim", "demo", "--transport", "tcp", "--dial", "5551234"], 2, "serial transport", False),

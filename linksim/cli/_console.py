@@ -1,9 +1,10 @@
-"""``linksim console`` and ``linksim plot``: argument parsing and exit status.
+"""``linksim console``, ``linksim control`` and ``linksim plot``: argument parsing and exit status.
 
-Exit status of ``console``: 0 when every command completed (an observer:
-when the watched session ended or the timeout passed), 1 when the run
-failed or ``--require-preview`` refused the plan, 2 for bad options.
-``plot``: 0 when the PNG was written, 1 when it could not be (no
+Exit status of ``console`` and ``control``: 0 when every command completed
+(an observer: when the watched session ended or the timeout passed), 1 when
+the run failed or the preview refused the plan (``--require-preview``, or a
+task file without ``--force``), 2 for bad options or a bad task file, 130
+on Ctrl-C.  ``plot``: 0 when the PNG was written, 1 when it could not be (no
 matplotlib, an empty or malformed log).
 """
 
@@ -12,19 +13,30 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from functools import partial
+
+import trio
 
 import serialsocket
 from linksim._errors import ConfigError
 from linksim._plotting import PlotUnavailable
-from linksim.arm import WorldConfig, rock_task
-from linksim.control import parse_log, plot_log, preview
-from linksim.demo import ConsoleOptions, DemoOptions, run_console
-from linksim.link import DirectionConfig, LinkConfig
+from linksim.arm import WorldConfig
+from linksim.control import TaskFile, parse_log, plot_log, preview, resolve_task
+from linksim.demo import ConsoleOptions, DemoOptions, print_report, run_console, run_control
+from linksim.link import DirectionConfig, LinkConfig, run_virtual
 
+from . import _demo
 from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, load_world, read_key
 from ._link import add_link_arguments, config_from_args
 
-__all__ = ["add_console_arguments", "add_plot_arguments", "console_main", "plot_main"]
+__all__ = [
+    "add_console_arguments",
+    "add_control_arguments",
+    "add_plot_arguments",
+    "console_main",
+    "control_main",
+    "plot_main",
+]
 
 
 _SPEEDUP = FloatRange(0.0, 1e6, unit="times real time")
@@ -50,7 +62,7 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
         "to watch the run (default 0: as fast as possible)",
     )
     ap.add_argument("--observer", action="store_true", help="watch an arm (tcp); send nothing")
-    ap.add_argument("--task", choices=["rock"], default="rock", help="the command list to drive")
+    _task_arguments(ap)
     ap.add_argument(
         "--require-preview",
         action="store_true",
@@ -76,10 +88,62 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
 
 
+def _task_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument(
+        "--task",
+        default="rock",
+        metavar="rock|FILE",
+        help="the commands to drive: rock (seed 000's rock task, the default) or a task file "
+        "(.toml or .json, - for stdin; examples/tasks/ has some)",
+    )
+    ap.add_argument(
+        "--force",
+        action="store_true",
+        help="send a task file even when the local model predicts the arm will refuse a command",
+    )
+
+
+def _check_stdin(args: argparse.Namespace) -> None:
+    if args.task == "-" and args.world == "-":
+        raise ConfigError("--task - and --world - cannot both read stdin")
+
+
+def _load_task(args: argparse.Namespace, world: WorldConfig) -> TaskFile:
+    """``--task``: the rock task or a task file, parsed and checked (errors: ValueError)."""
+    stdin = sys.stdin.read((1 << 20) + 1) if args.task == "-" else None
+    try:
+        return resolve_task(args.task, world, stdin)
+    except KeyError as exc:  # the rock task in a world without a rock or a bin
+        raise ConfigError(f"--task rock: {exc.args[0]}") from None
+
+
+def _is_file(task: TaskFile) -> bool:
+    return task.source != "rock"
+
+
+def _refusal(task: TaskFile, world: WorldConfig) -> str | None:
+    """Why the preview refuses a task file (None: it passes, or it is a built-in task)."""
+    if not _is_file(task):
+        return None
+    refusal = preview(task.commands, world).first_refusal
+    if refusal is None:
+        return None
+    return (
+        f"{task.where(refusal.index)} ({refusal.label}) would be refused by the arm: "
+        f"{refusal.reason.name}: {refusal.message}; nothing was sent (--force sends it anyway)"
+    )
+
+
 def console_main(args: argparse.Namespace) -> int:
     """``linksim console``."""
     try:
+        _check_stdin(args)
+        if args.force and args.require_preview:
+            raise ConfigError("--force and --require-preview contradict each other")
+        if args.observer and (args.force or args.task != "rock"):
+            raise ConfigError("--observer sends nothing: not with --task or --force")
         world = load_world(args.world)
+        task = _load_task(args, world)
         key = read_key(args.key_file) if args.key_file else None
         if args.speedup < 0 or (args.speedup and not args.virtual):
             raise ConfigError("--speedup is a positive factor for --virtual runs")
@@ -111,7 +175,7 @@ def console_main(args: argparse.Namespace) -> int:
         options = ConsoleOptions(
             demo,
             observer=args.observer,
-            require_preview=args.require_preview,
+            require_preview=args.require_preview or (_is_file(task) and not args.force),
             log=args.log,
             host=args.host,
             tcp_port=args.tcp_port,
@@ -119,12 +183,13 @@ def console_main(args: argparse.Namespace) -> int:
             baud=args.baud,
             dial=args.dial,
             rate=args.speedup,
+            task=task,
         )
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim console: {exc}", file=sys.stderr)
         return 2
     if args.preview_only:
-        return _preview_only(world, as_json=args.json)
+        return _preview_only(world, task, as_json=args.json)
     try:
         result = run_console(options)
     except KeyboardInterrupt:
@@ -138,9 +203,9 @@ def console_main(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
-def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
-    """``--preview-only``: the rock task on the local model; 0 when nothing is refused."""
-    report = preview(rock_task(world).commands, world)
+def _preview_only(world: WorldConfig, task: TaskFile, *, as_json: bool) -> int:
+    """``--preview-only``: the task on the local model; 0 when nothing is refused."""
+    report = preview(task.commands, world)
     if as_json:
         json.dump(report.as_dict(), sys.stdout)
         sys.stdout.write("\n")
@@ -155,6 +220,84 @@ def _preview_only(world: WorldConfig, *, as_json: bool) -> int:
             f"ends with the hand at ({p}) m"
         )
     return 0 if report.ok else 1
+
+
+def add_control_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim control``: the connection's (``linksim demo``'s module), the task's."""
+    _demo.add_control_arguments(ap)
+    _task_arguments(ap)
+    ap.add_argument(
+        "--virtual",
+        action="store_true",
+        help="run the arm server in this process over a clean in-memory line of --baud and "
+        "--delay, on a virtual clock: instant, deterministic (no arm-server needed)",
+    )
+
+
+def control_main(args: argparse.Namespace) -> int:
+    """``linksim control``: run a task against a running ``linksim arm-server`` (or --virtual)."""
+    prog = "linksim control"
+    try:
+        if args.virtual and (args.port or args.dial):
+            raise ConfigError("--port and --dial reach a real arm server; not with --virtual")
+        if args.virtual and (args.host != "127.0.0.1" or args.tcp_port != 7010):
+            raise ConfigError("--host and --tcp-port reach a real arm server; not with --virtual")
+        if not args.virtual and args.transport == "serial" and not args.port:
+            raise ConfigError("--port PATH is needed for the serial transport (or use --virtual)")
+        _check_stdin(args)
+        world = load_world(args.world)
+        task = _load_task(args, world)
+        key = read_key(args.key_file) if args.key_file else None
+        link = LinkConfig.symmetric(
+            DirectionConfig(
+                rate=args.baud if args.transport == "serial" else None, delay=args.delay
+            )
+        )
+        options = DemoOptions(
+            link=link,
+            preset=None,
+            transport=args.transport,
+            virtual=args.virtual,
+            window=args.window,
+            max_len=args.max_len,
+            world=world,
+            key=key,
+            progress=not args.quiet,
+            live=False if args.plain else None,
+            timeout=args.timeout,
+        )
+    except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    refusal = None if args.force else _refusal(task, world)
+    if refusal is not None:
+        print(f"{prog}: {refusal}", file=sys.stderr)
+        return 1
+    run = partial(
+        run_control,
+        options,
+        key=key,
+        host=args.host,
+        tcp_port=args.tcp_port,
+        port=args.port,
+        baud=args.baud,
+        dial=args.dial,
+        commands=task.commands,
+        task=task.name if _is_file(task) else "rock task",
+    )
+    try:
+        if args.virtual:
+            report = run_virtual(run)  # trio's virtual clock, its scheduler seeded
+        else:
+            report = trio.run(run)
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130  # as a shell reports SIGINT
+    print_report(report, as_json=args.json)
+    if not report.ok:
+        print(f"{prog}: {report.error or 'the run failed'}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def add_plot_arguments(ap: argparse.ArgumentParser) -> None:

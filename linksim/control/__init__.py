@@ -7,6 +7,10 @@
   (:class:`PreviewReport`); :class:`Predictor` keeps the predicted state
   ahead of the confirmed one and records :class:`Divergence`;
   :class:`ConsoleSession` / :class:`ConsoleSnapshot` draw it.
+* Your own commands: :func:`parse_command` reads the operator's command
+  language (``move_joint 1 20deg``; :class:`CommandSyntaxError`),
+  :func:`resolve_task` / :func:`load_task` a task file (:class:`TaskFile`,
+  :class:`TaskFileError`).
 * :class:`TelemetryLog` / :func:`read_log` write and read the JSON-lines log
   (:func:`parse_log` reads it from lines, stdin for one);
   :func:`plot_log` plots it (``linksim plot``).
@@ -20,11 +24,14 @@ from ._plot import plot_log
 from ._predict import Divergence, Predictor
 from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
 from ._progress import Progress
+from ._taskfile import TaskFile, TaskFileError, load_task, resolve_task
 from ._telemetry_log import TelemetryLog, parse_log, read_log
+from ._vocabulary import CommandSyntaxError, format_command, parse_command
 
 __all__ = [
     "CommandRecord",
     "CommandState",
+    "CommandSyntaxError",
     "ConsoleSession",
     "ConsoleSnapshot",
     "Divergence",
@@ -33,11 +40,17 @@ __all__ = [
     "Predictor",
     "PreviewReport",
     "Progress",
+    "TaskFile",
+    "TaskFileError",
     "TaskRun",
     "TelemetryLog",
     "feedback_record",
+    "format_command",
+    "load_task",
+    "parse_command",
     "parse_log",
     "plot_log",
     "preview",
     "read_log",
+    "resolve_task",
 ]

@@ -19,7 +19,14 @@ import trio.testing
 
 import serialsocket
 from linksim.arm import SimulatedArm, WorldConfig
-from linksim.control import CommandState, ConsoleSession, TaskRun, TelemetryLog, preview
+from linksim.control import (
+    CommandState,
+    ConsoleSession,
+    TaskFile,
+    TaskRun,
+    TelemetryLog,
+    preview,
+)
 from linksim.link import endpoint_config_for, rtt_hint_for, run_virtual
 from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream, connect_tcp
 
@@ -57,6 +64,12 @@ class ConsoleOptions:
     arm_world: WorldConfig | None = None
     """Virtual runs only: the *remote* arm's world when it differs from the
     model's (``demo.world``), to show divergence; None = the same world."""
+    task: TaskFile | None = None
+    """The commands to drive (a task file); None = the rock task."""
+
+    @property
+    def task_name(self) -> str:
+        return "rock task" if self.task is None or self.task.source == "rock" else self.task.name
 
 
 @dataclass(slots=True)
@@ -124,7 +137,9 @@ def _session(options: ConsoleOptions, title: str) -> tuple[ConsoleSession, Telem
     log = None
     if options.log is not None:
         log = TelemetryLog(options.log, origin=now, title=title, world=world.to_toml())
-    run: TaskRun | None = None if options.observer else new_run(options.demo)
+    run: TaskRun | None = None
+    if not options.observer:
+        run = new_run(options.demo) if options.task is None else TaskRun(options.task.commands)
     session = ConsoleSession(
         title,
         world,
@@ -145,9 +160,13 @@ def _refused_by_preview(session: ConsoleSession, options: ConsoleOptions) -> str
     if options.require_preview and report is not None and not report.ok:
         refusal = report.first_refusal
         assert refusal is not None
+        where, hint = f"#{refusal.index}", ""
+        if options.task is not None and options.task.source != "rock":
+            where = f"#{refusal.index} ({options.task.where(refusal.index)})"
+            hint = " (--force sends it anyway)"
         return (
-            f"preview refused command #{refusal.index} ({refusal.label}): "
-            f"{refusal.reason.name}: {refusal.message}; nothing was sent"
+            f"preview refused command {where} ({refusal.label}): "
+            f"{refusal.reason.name}: {refusal.message}; nothing was sent{hint}"
         )
     return None
 
@@ -162,7 +181,7 @@ async def _virtual(options: ConsoleOptions) -> ConsoleResult:
     start = trio.current_time()
     figures: dict[str, Any] = {}
     where = f"{demo.preset or 'custom link'}, virtual time"
-    title = f"telelink console: rock task over {demo.transport} ({where})"
+    title = f"telelink console: {options.task_name} over {demo.transport} ({where})"
     session, log = _session(options, title)
     error = _refused_by_preview(session, options)
     try:
@@ -220,7 +239,7 @@ async def _real(options: ConsoleOptions) -> ConsoleResult:
     demo = options.demo
     start = trio.current_time()
     figures: dict[str, Any] = {}
-    role = "watching" if options.observer else "rock task"
+    role = "watching" if options.observer else options.task_name
     title = f"telelink console: {role} over {demo.transport}"
     session, log = _session(options, title)
     error = _refused_by_preview(session, options)
