@@ -226,9 +226,11 @@ def build_parser() -> argparse.ArgumentParser:
     server = sub.add_parser("arm-server", help="the simulated arm behind a command server")
     _armserver.add_arguments(server)
     server.set_defaults(func=_armserver.arm_server_main)
-    control = sub.add_parser("control", help="run the rock task against a linksim arm-server")
-    _demo.add_control_arguments(control)
-    control.set_defaults(func=_demo.control_main)
+    control = sub.add_parser(
+        "control", help="run the rock task or a task file against a linksim arm-server"
+    )
+    _console.add_control_arguments(control)
+    control.set_defaults(func=_console.control_main)
     console = sub.add_parser(
         "console",
         help="operator console: preview, predicted vs confirmed state, queue, link, log",
