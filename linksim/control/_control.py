@@ -258,23 +258,40 @@ class TaskRun:
         wake: _Wake,
         failed: trio.Event,
     ) -> None:
-        """Apply what the handles say to the records, oldest command first."""
+        """Apply what the handles say to the records, oldest command first.
+
+        A command's outcome is applied only once every earlier command's is:
+        after a resume the arm pushes the outcome of a command that finished
+        on the new connection at once, while those that finished during the
+        outage are answered only when the re-sent commands reach it, a round
+        trip later (seen through ``linksim proxy --cut``: #8 completed 14 s
+        before #1).  The arm ran them in order; the records, the console and
+        its predictor see them in that order too.
+        """
         while True:
             await wake.wait()
             now = trio.current_time()
+            earlier_final = True
             for record, handle in sent:
-                if self._apply(record, handle, now):
+                if self._apply(record, handle, now, may_finish=earlier_final):
                     failed.set()
+                earlier_final = earlier_final and record.state.final
             if wake.closing and all(record.state.final for record, _ in sent):
                 return
 
-    def _apply(self, record: CommandRecord, handle: CommandHandle, now: float) -> bool:
-        """Move ``record`` along as far as ``handle`` went; True if it just failed."""
+    def _apply(
+        self, record: CommandRecord, handle: CommandHandle, now: float, *, may_finish: bool
+    ) -> bool:
+        """Move ``record`` along as far as ``handle`` went; True if it just failed.
+
+        With ``may_finish`` false (an earlier command is still open) it goes no
+        further than ACCEPTED.
+        """
         if record.state is CommandState.SENT and handle.position is not None:
             record.state = CommandState.ACCEPTED
             record.accepted_at = now
             self.on_change()
-        if record.state.final or not handle.done:
+        if record.state.final or not handle.done or not may_finish:
             return False
         record.done_at = now
         error = handle.error
