@@ -21,6 +21,7 @@ import argparse
 import importlib.util
 import math
 import pkgutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import serial
@@ -46,6 +47,7 @@ __all__ = [
     "IntRange",
     "PacketTypeLetter",
     "SerialPortName",
+    "parse_args",
     "retype",
 ]
 
@@ -148,6 +150,24 @@ class PacketTypeLetter:
                 f"must be one printable character ! through ~ (D, Y, N...), got {text!r}"
             )
         return text
+
+
+def parse_args(ap: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """``ap.parse_args(argv)``, but an unrecognized argument is reported with
+    the usage of the (innermost) subcommand it was given to, not the top
+    level's: ``linksim bench goodput --bogus`` shows ``usage: linksim bench
+    goodput ...``.  Exit status 2, as argparse's own errors."""
+    args, extra = ap.parse_known_args(argv)
+    if extra:
+        parser = ap
+        while True:
+            subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+            chosen = getattr(args, subs[0].dest, None) if subs and subs[0].dest else None
+            if not subs or chosen is None or chosen not in subs[0].choices:
+                break
+            parser = subs[0].choices[chosen]
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
 
 
 def retype(ap: argparse.ArgumentParser, types: dict[str, object]) -> None:

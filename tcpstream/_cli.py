@@ -68,6 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     keys.add_argument("--key-file", help="the pre-shared key file (hex), to verify tags")
     keys.add_argument("--key", help="the pre-shared key as hex digits, to verify tags")
     dec.add_argument("--hex", action="store_true", help="the inputs are hex text, not raw bytes")
+    dec.set_defaults(usage_parser=dec)
     return ap
 
 
@@ -203,7 +204,10 @@ def _decode(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``tcpstream decode ...``; returns the exit status."""
-    args = _parser().parse_args(argv)
+    ap = _parser()
+    args, extra = ap.parse_known_args(argv)
+    if extra:  # reported with the subcommand's usage, not the top level's
+        args.usage_parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return _decode(args)
     except BrokenPipeError:

@@ -17,6 +17,7 @@ import trio
 from linksim import __version__
 from linksim._errors import ConfigError
 from linksim.link import CallOutcome, ModemConfig, ModemPair, RelayStatistics, run_relay
+from serialsocket.argtypes import parse_args
 from tcpstream import write_key_file
 
 from . import _armserver, _bench, _console, _demo, _proxy, _soak
@@ -272,7 +273,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     interrupts still say BYE on the way out); a closed pipe on stdout ends
     it quietly with 141.
     """
-    args = build_parser().parse_args(argv)
+    args = parse_args(build_parser(), argv)
     try:
         status: int = args.func(args)
     except BrokenPipeError:
