@@ -26,6 +26,7 @@ SANS_IO = [
     "_packet",
     "_params",
     "_parser",
+    "_pcapng",
     "_receiver",
     "_rtt",
     "_sender",
@@ -78,7 +79,7 @@ def test_import_direction(package: str, forbidden: set[str]) -> None:
 
 
 def test_public_names_are_pinned() -> None:
-    from serialsocket import kermit, packets  # the two public submodules
+    from serialsocket import capture, kermit, packets  # the public submodules
 
     assert sorted(serialsocket.__all__) == sorted(
         [
@@ -176,7 +177,22 @@ def test_public_names_are_pinned() -> None:
             "kermit_send",
         ]
     )
-    for face in (serialsocket, packets, kermit):
+    assert sorted(capture.__all__) == sorted(
+        [
+            "LINKTYPE_SERIAL",
+            "LINKTYPE_TCPSTREAM",
+            "Capture",
+            "CaptureFile",
+            "CapturedPacket",
+            "CapturingStream",
+            "Direction",
+            "Interface",
+            "PcapngError",
+            "PcapngWriter",
+            "read_pcapng",
+        ]
+    )
+    for face in (serialsocket, packets, kermit, capture):
         for name in face.__all__:
             assert getattr(face, name) is not None
 
