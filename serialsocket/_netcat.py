@@ -11,6 +11,10 @@ stdin and stdout are read and written in worker threads, not through
 non-blocking mode (see trio's FdStream warning), and a slow stdout must not
 stall the event loop that answers the peer's packets.
 
+``--capture FILE`` writes what crosses the port, both ways and timestamped,
+to a pcapng file (:mod:`serialsocket.capture`; from the connection on, not
+the modem dialogue).
+
 ``--stats`` / ``--json`` print the counters at the end on stderr (stdout
 carries the peer's data), however the run ended; a progress line is kept on
 stderr while it is a terminal (``--quiet``: none).
@@ -33,6 +37,7 @@ from dataclasses import dataclass
 
 import trio
 
+from ._capture import CaptureFile, CapturingStream
 from ._config import MAX_WINDOW, EndpointConfig
 from ._driver import LinkBroken
 from ._errors import LocalProtocolError
@@ -91,6 +96,12 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
     )
     ap.add_argument("--dead-after", type=float, help="declare the link dead after this silence")
     ap.add_argument("--trace", action="store_true", help="log every packet, decoded, to stderr")
+    ap.add_argument(
+        "--capture",
+        metavar="FILE",
+        help="write the port's traffic, both ways with timestamps, to FILE.pcapng "
+        "(for Wireshark with contrib/wireshark/telelink.lua)",
+    )
     report = ap.add_argument_group(
         "reports (on stderr: stdout carries the peer's data)",
     )
@@ -124,6 +135,8 @@ class _Tally:
     """What this run moved, for the final report (whatever ended it)."""
 
     sock: SerialSocket | None = None
+    capture: CaptureFile | None = None
+    """The ``--capture`` file, closed by :func:`netcat_main` however the run ended."""
     stdin_bytes: int = 0
     stdout_bytes: int = 0
     peer_eof: bool = False
@@ -230,6 +243,8 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
 
 async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None:
     _config(args, None)  # validate the options before touching the port
+    if args.capture:
+        tally.capture = CaptureFile(args.capture)
     port = await open_port(args.port, args.baud or _DEFAULT_BAUD)
     stream: trio.abc.Stream = port
     try:
@@ -241,8 +256,12 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
         if modem is not None:
             print(f"serialsocket: {modem.result}", file=sys.stderr)
         cfg = _config(args, modem)
+        if tally.capture is not None:
+            name = "listen" if listening else "connect"
+            interface = tally.capture.add_interface(args.port, description=f"serialsocket {name}")
+            stream = CapturingStream(port, tally.capture, interface)
         if args.trace:
-            stream = TracingStream(port, cfg.encoding)
+            stream = TracingStream(stream, cfg.encoding)
     except BaseException:
         await trio.aclose_forcefully(port)
         raise
@@ -307,6 +326,8 @@ def netcat_main(args: argparse.Namespace, *, listening: bool) -> int:
     args.show_progress = not args.quiet and sys.stderr.isatty()
     tally = _Tally()
     status = _netcat(args, listening, name, tally)
+    if tally.capture is not None:
+        tally.capture.close()
     outcome = {0: "delivered", 2: "bad options", 130: "interrupted"}.get(status, "failed")
     if status != 2 and (args.stats or args.json):
         record = tally.record(outcome)

@@ -274,6 +274,7 @@ FREE_TEXT = {
     "plot_ber": "bench goodput: a PNG written",
     "write_config": "relay --write-config: a file written (never over one), exit 1",
     "write_world": "arm-server --write-world: a file written (never over one), exit 1",
+    "capture": "relay/listen/connect/arm-server --capture: a pcapng file written, exit 1",
     "task": "console/control --task rock|FILE: parsed and previewed before anything runs, "
     "exit 2 (tests/linksim/test_taskfile.py)",
 }

@@ -23,6 +23,7 @@ from linksim.link import (
     endpoint_overrides,
     server_config_for,
 )
+from serialsocket.capture import CaptureFile
 from tcpstream import Server
 
 from ._args import (
@@ -79,6 +80,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         "(default 200; at least 16 at the default heartbeat; 0: no limit)",
     )
     ap.add_argument("--sessions", type=COUNT, help="exit after this many sessions (>= 1)")
+    ap.add_argument(
+        "--capture",
+        metavar="FILE",
+        help="write the traffic, both ways with timestamps, to FILE.pcapng: the serial "
+        "port's Kermit packets, or each TCP connection's command packets "
+        "(for Wireshark with contrib/wireshark/telelink.lua)",
+    )
     ap.add_argument("-v", "--verbose", action="store_true", help="log sessions to stderr")
 
 
@@ -113,6 +121,8 @@ def arm_server_main(args: argparse.Namespace) -> int:
         print("linksim arm-server: --port PATH is needed for the serial transport", file=sys.stderr)
         return 2
 
+    capture: CaptureFile | None = None
+
     async def main() -> None:
         arm = SimulatedArm(world)
         async with Server(arm, server_cfg) as server:
@@ -124,15 +134,23 @@ def arm_server_main(args: argparse.Namespace) -> int:
                     baud=args.baud,
                     answer=args.answer,
                     sessions=args.sessions,
+                    capture=capture,
                 )
             else:
-                await serve_arm_tcp(server, args.tcp_port, host=args.host, sessions=args.sessions)
+                await serve_arm_tcp(
+                    server, args.tcp_port, host=args.host, sessions=args.sessions, capture=capture
+                )
 
     try:
+        if args.capture:
+            capture = CaptureFile(args.capture)
         trio.run(main)
     except KeyboardInterrupt:
         return 0
     except (OSError, serialsocket.DialError) as exc:
         print(f"linksim arm-server: {exc}", file=sys.stderr)
         return 1
+    finally:
+        if capture is not None:
+            capture.close()
     return 0

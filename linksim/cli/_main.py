@@ -18,6 +18,7 @@ from linksim import __version__
 from linksim._errors import ConfigError
 from linksim.link import CallOutcome, ModemConfig, ModemPair, RelayStatistics, run_relay
 from serialsocket.argtypes import parse_args
+from serialsocket.capture import CaptureFile
 from tcpstream import write_key_file
 
 from . import _armserver, _bench, _console, _demo, _proxy, _soak
@@ -40,6 +41,12 @@ def _relay_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--stats", action="store_true", help="print live counters to stderr")
     ap.add_argument("--stats-interval", type=SECONDS, default=1.0, help="seconds between counters")
     ap.add_argument("--duration", type=SECONDS, help="stop after this many seconds")
+    ap.add_argument(
+        "--capture",
+        metavar="FILE",
+        help="write both ttys' traffic to FILE.pcapng with timestamps (one interface per "
+        "tty; open it with contrib/wireshark/telelink.lua)",
+    )
     ap.add_argument(
         "--write-config",
         metavar="FILE",
@@ -120,6 +127,14 @@ def relay_main(args: argparse.Namespace) -> int:
     def stats(s: RelayStatistics) -> None:
         _print_stats(s, args.json)
 
+    capture: CaptureFile | None = None
+    if args.capture:
+        try:
+            capture = CaptureFile(args.capture)
+        except OSError as exc:
+            print(f"linksim relay: cannot write {args.capture}: {exc.strerror}", file=sys.stderr)
+            return 1
+
     async def run() -> RelayStatistics:
         stop = trio.Event()
         async with trio.open_nursery() as nursery:
@@ -140,6 +155,7 @@ def relay_main(args: argparse.Namespace) -> int:
                 on_ready=ready,
                 on_stats=stats if args.stats else None,
                 stats_interval=args.stats_interval,
+                capture=capture,
             )
             nursery.cancel_scope.cancel()
         return result
@@ -153,6 +169,9 @@ def relay_main(args: argparse.Namespace) -> int:
         # A --device that cannot be opened arrives from inside the relay's nursery.
         print(f"linksim relay: {exc}", file=sys.stderr)
         return 1
+    finally:
+        if capture is not None:
+            capture.close()
     if args.stats:
         _print_stats(final, args.json)
     return 0

@@ -16,6 +16,11 @@ line rate, as on a real port) or while ``out_buffer`` bytes wait to be written
 to the far tty.  A program closing its end of a pty is normal (the master then
 reads EIO until someone opens the slave again): the relay keeps running and
 polls every ``_HUP_POLL`` seconds.
+
+With a :class:`serialsocket.capture.CaptureFile`, each side's tty is one
+interface of the capture: what its program wrote is recorded outbound when the
+relay reads it, what the line delivers to it inbound at its modelled arrival
+time (so the capture shows the impairments).
 """
 
 from __future__ import annotations
@@ -26,11 +31,14 @@ import math
 import os
 import select
 import socket
+import time
 import tty
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import trio
+
+from serialsocket.capture import CaptureFile, Direction
 
 from ._config import LinkConfig
 from ._impair import DirectionStatistics, LinkDirection
@@ -206,6 +214,7 @@ class _Relay:
         modems: ModemPair | None,
         tx_buffer: int,
         out_buffer: int,
+        capture: CaptureFile | None = None,
     ) -> None:
         self.engines = (
             LinkDirection(config.a_to_b, seed=config.seed, direction=0),
@@ -218,12 +227,22 @@ class _Relay:
         self.origin = trio.current_time()
         self.wake = trio.Event()
         self.signal = [True, True]  # line signal into side 0 / side 1
+        self.capture = capture
+        self.wall_origin = time.time()  # link time 0 as a capture timestamp
+        if capture is not None:
+            for name, port in zip("ab", ports, strict=True):
+                capture.add_interface(port.path, description=f"linksim relay side {name}")
 
     def now(self) -> float:
         return trio.current_time() - self.origin
 
-    def _emit(self, side: int, data: bytes) -> None:
+    def _record(self, side: int, data: bytes, direction: Direction, now: float) -> None:
+        if self.capture is not None:
+            self.capture.record(side, data, direction, self.wall_origin + now)
+
+    def _emit(self, side: int, data: bytes, now: float) -> None:
         if data:
+            self._record(side, data, Direction.INBOUND, now)
             port = self.ports[side]
             port.out += data
             port.out_ready.set()
@@ -237,7 +256,7 @@ class _Relay:
             line = m.data_to_line(side)
             if line:
                 self.engines[side].send(line, now)
-            self._emit(side, m.data_to_dte(side))
+            self._emit(side, m.data_to_dte(side), now)
 
     def deliver(self, now: float) -> None:
         """Hand everything that has arrived by ``now`` to the far side."""
@@ -253,7 +272,7 @@ class _Relay:
         for src in (0, 1):
             data = self.engines[src].receive(now)
             if m is None:
-                self._emit(1 - src, data)
+                self._emit(1 - src, data, now)
             elif data:
                 m.from_line(1 - src, data, now)
         self._flush_modems(now)
@@ -288,6 +307,7 @@ class _Relay:
                     await trio.sleep(_HUP_POLL)
                 raise ConnectionError(str(ended)) from None
             now = self.now()
+            self._record(side, data, Direction.OUTBOUND, now)
             if self.modems is None:
                 engine.send(data, now)
             else:
@@ -331,6 +351,7 @@ async def run_relay(
     stats_interval: float = 1.0,
     tx_buffer: int = DEFAULT_TX_BUFFER,
     out_buffer: int = DEFAULT_OUT_BUFFER,
+    capture: CaptureFile | None = None,
 ) -> RelayStatistics:
     """Relay between two ttys through ``config``'s impairments.
 
@@ -338,10 +359,12 @@ async def run_relay(
     returns the final counters), or until cancelled.  ``on_ready(path_a,
     path_b)`` is called once both ttys can be opened; ``on_stats`` every
     ``stats_interval`` seconds.  The fds it opened are closed on the way out.
+    ``capture`` records both ttys' traffic (interfaces 0 and 1, named by their
+    paths); it stays open: closing it is the caller's.
     """
     ports, fds = _open_ports(devices)
     try:
-        relay = _Relay(config, ports, modems, tx_buffer, out_buffer)
+        relay = _Relay(config, ports, modems, tx_buffer, out_buffer, capture)
         if on_ready is not None:
             on_ready(ports[0].path, ports[1].path)
         with trio.move_on_after(math.inf if duration is None else duration):
