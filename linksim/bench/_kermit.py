@@ -19,6 +19,7 @@ The same machinery runs the interop tests (tests/serialsocket/test_kermit_intero
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
 import shutil
@@ -42,6 +43,7 @@ __all__ = [
     "available",
     "bad_pairing",
     "run_bench_kermit",
+    "run_interrupted",
     "run_transfer",
 ]
 
@@ -119,6 +121,7 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         "set transfer mode manual",
         "set file names literal" if setup.literal_names else "set file names converted",
         "set file collision overwrite",
+        "set file incomplete keep",
         "set attributes on",
         f"set window {setup.window}",
         f"set receive packet-length {setup.packet_length}",
@@ -142,8 +145,7 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
 def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[str]:
     """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
     argv = ["gkermit", "-q", "-w", "-S", "-b", str(setup.timeout)]
-    if not setup.text:
-        argv.append("-i")
+    argv.append("-T" if setup.text else "-i")
     if setup.literal_names:
         argv.append("-P")
     argv += ["-e", str(min(max(setup.packet_length, 40), 9000))]
@@ -298,6 +300,62 @@ def run_transfer(
                 f"{f.stat().st_size} sent ({setup.sender}->{setup.receiver})"
             )
     return result
+
+
+async def _cut(setup: TransferSetup, path: pathlib.Path, out_dir: pathlib.Path, cut: int) -> int:
+    """Start sending ``path`` and kill both sides once the receiver holds ``cut`` bytes.
+
+    Our side is cancelled (a receiver keeps ``NAME.part``); C-Kermit and
+    G-Kermit are killed as an interrupted line would leave them.  Returns
+    the size of the partial file left at the receiver.
+    """
+    direction = DirectionConfig(
+        rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
+    )
+    config = LinkConfig.symmetric(direction, seed=setup.seed)
+    partial = out_dir / (path.name + ".part" if setup.receiver == "ours" else path.name)
+    log: list[str] = []
+    ours: list[KermitStatistics] = []
+
+    async def quietly(
+        peer: str, line: str, files: Sequence[pathlib.Path], where: pathlib.Path
+    ) -> None:
+        with contextlib.suppress(Exception):
+            await _run_peer(peer, setup, line, files, where, log, ours)
+
+    with trio.fail_after(setup.limit):
+        async with trio.open_nursery() as nursery:
+            ready: list[tuple[str, str]] = []
+            got_paths = trio.Event()
+
+            def on_ready(a: str, b: str) -> None:
+                ready.append((a, b))
+                got_paths.set()
+
+            nursery.start_soon(lambda: run_relay(config, stop=trio.Event(), on_ready=on_ready))
+            await got_paths.wait()
+            line_a, line_b = ready[0]
+            nursery.start_soon(quietly, setup.receiver, line_b, [], out_dir)
+            await trio.sleep(_START_GAP)
+            nursery.start_soon(quietly, setup.sender, line_a, [path], out_dir.parent)
+            while not (partial.exists() and partial.stat().st_size >= cut):
+                await trio.sleep(0.02)
+            nursery.cancel_scope.cancel()
+    return partial.stat().st_size
+
+
+def run_interrupted(
+    setup: TransferSetup, path: pathlib.Path, out_dir: pathlib.Path, cut: int
+) -> tuple[int, TransferResult]:
+    """A transfer killed once the receiver holds ``cut`` bytes, then resumed with RESEND.
+
+    Returns:
+        The bytes the receiver held after the cut, and the resumed
+        transfer's result (``setup`` with ``resend`` set; the file is checked
+        byte for byte as by :func:`run_transfer`).
+    """
+    held = trio.run(_cut, setup, path, out_dir, cut)
+    return held, run_transfer(replace(setup, resend=True), [path], out_dir)
 
 
 def _setup(pair: str, base: TransferSetup, seed: int) -> TransferSetup:

@@ -169,7 +169,9 @@ class KermitReceiver(KermitSide):
             if data:
                 self._events.append(FileData(data))
         elif state is KermitState.RECEIVE_DATA and ptype == PacketType.ATTRIBUTES:
-            return self._on_attributes(parse_attributes(self._decode(packet.data)))
+            # Literal, not prefix-decoded: C-Kermit's sattr() sends the field
+            # as built and gattr() reads it so (a length of 3 is tochar(3) = '#').
+            return self._on_attributes(parse_attributes(packet.data))
         elif state is KermitState.RECEIVE_DATA and ptype == PacketType.EOF:
             discarded = self._decode(packet.data)[:1] == b"D"
             if self._text is not None and (tail := self._text.flush()):

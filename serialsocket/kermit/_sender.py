@@ -350,14 +350,15 @@ class KermitSender(KermitSide):
     def _attributes(self) -> bytes:
         """A packet: type, date, size (K and bytes), RESEND disposition, end."""
         assert self._file is not None
-        assert self._neg is not None
         fields = encode_attributes(
             size=self._file.size,
             text=self.config.text,
             date=self._file.date,
             resend=self._resending(),
         )
-        return self._neg.send_encoding.encode(fields)
+        # Sent literally, as C-Kermit's sattr() does (every character is
+        # printable; prefix-encoding it would turn tochar(3) = '#' into '##').
+        return fields
 
     def _fill(self, now: float) -> None:
         """Send D packets while the window has room; Z once the file is all acknowledged."""

@@ -380,5 +380,5 @@ def test_receiver_refuses_a_text_resend() -> None:
     receiver.data_to_send()
     field = encode_attributes(size=5, text=True, date=None, resend=True)
     assert field == b'"#AMJ!!11!5+!R@ '
-    receiver.receive_data(_packet(2, "A", field.replace(b"#", b"##")), 0.3)  # prefixed
+    receiver.receive_data(_packet(2, "A", field), 0.3)  # literal, as C-Kermit sends it
     assert receiver.data_to_send() == _packet(2, "Y", b"N+")
