@@ -91,7 +91,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
             "--window", type=KERMIT_WINDOW, default=8, help="window slots, 1..31 (default 8)"
         )
         p.add_argument(
-            "--check", type=int, choices=(1, 2, 3), default=3, help="block check (default 3)"
+            "--check",
+            type=int,
+            choices=(1, 2, 3, 5),
+            default=3,
+            help="block check (default 3; 5 = FORCE-3: CRC-16 on the init packets too)",
         )
         p.add_argument(
             "--timeout",
@@ -120,7 +124,8 @@ def _config(args: argparse.Namespace) -> KermitConfig:
     return KermitConfig(
         max_packet_length=args.packet_length,
         window=args.window,
-        check=BlockCheck(args.check),
+        check=BlockCheck(3 if args.check == 5 else args.check),
+        force3=args.check == 5,
         timeout=args.timeout,
         retry_limit=args.retries,
         seven_bit=args.seven_bit,

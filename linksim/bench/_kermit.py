@@ -88,6 +88,8 @@ class TransferSetup:
         resend: the sender uses RESEND (ours ``resend``, C-Kermit ``resend``).
         dynamic_length: ours chooses its D packet length (False: always the
             longest, as the bench compared before).
+        force3: ours uses FORCE-3 (block check 5; C-Kermit's own side is
+            set through ``extra_ckermit``).
         extra_ckermit: more C-Kermit commands, before SEND/RECEIVE.
     """
 
@@ -106,6 +108,7 @@ class TransferSetup:
     text: bool = False
     resend: bool = False
     dynamic_length: bool = True
+    force3: bool = False
     extra_ckermit: tuple[str, ...] = ()
 
 
@@ -165,6 +168,7 @@ def _our_config(setup: TransferSetup) -> KermitConfig:
         text=setup.text,
         resend=setup.resend,
         dynamic_length=setup.dynamic_length,
+        force3=setup.force3,
     )
 
 

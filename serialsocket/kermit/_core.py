@@ -59,7 +59,7 @@ from serialsocket._checks import BlockCheck
 from serialsocket._encoding import Encoding
 from serialsocket._errors import LocalProtocolError, MalformedDataError, RemoteProtocolError
 from serialsocket._packet import Packet, build_packet
-from serialsocket._parser import PacketParser, PacketReceived, RejectReason
+from serialsocket._parser import PacketParser, PacketReceived, PacketRejected, RejectReason
 from serialsocket._wire import CR, MAX_PACKET_LENGTH, PacketType
 
 from ._params import (
@@ -299,10 +299,12 @@ class KermitSide(abc.ABC):
         self._state = state
         self._mine = KermitInit.mine(config)
         self._neg: KermitNegotiated | None = None
+        self._init_check = BlockCheck.CRC16 if config.force3 else BlockCheck.SUM6
+        """Check on S and its ACK: type 1, or CRC-16 under FORCE-3."""
         self._parser = PacketParser(
             max_length=min(max(config.max_packet_length, 96) + _PARSER_SLACK, MAX_PACKET_LENGTH),
-            check=BlockCheck.SUM6,
-            init_check=BlockCheck.SUM6,
+            check=self._init_check,
+            init_check=self._init_check,
         )
         self._out = bytearray()
         self._events: deque[KermitEvent] = deque()
@@ -353,6 +355,8 @@ class KermitSide(abc.ABC):
         self._parser.receive_data(data)
         while not self.finished and (event := self._parser.next_event()) is not None:
             if not isinstance(event, PacketReceived):
+                event = self._force3_init(event) or event
+            if not isinstance(event, PacketReceived):
                 if event.reason is RejectReason.GARBAGE:
                     # Bytes outside any packet: a stray byte before the first
                     # packet, line noise, a packet whose MARK was hit.  C-Kermit
@@ -378,6 +382,34 @@ class KermitSide(abc.ABC):
                 self._on_packet(packet, now)
             except RemoteProtocolError as exc:
                 self.abort(exc.error_hint, message=str(exc))
+
+    def _force3_init(self, event: PacketRejected) -> PacketReceived | None:
+        """An S or I whose type-1 check failed may carry a CRC-16 (FORCE-3).
+
+        C-Kermit reads CHKT before checking an init packet (ckcfn2.c rpack);
+        here the rejected bytes are read again with CRC-16 on init packets.
+        If that verifies, the peer is in FORCE-3 and so are we from now on:
+        our ACK of it carries a CRC-16 too.
+        """
+        if (
+            self._neg is not None
+            or self._init_check is BlockCheck.CRC16
+            or event.reason is not RejectReason.BAD_CHECK
+            or event.type not in (PacketType.SEND_INIT, PacketType.INIT)
+        ):
+            return None
+        parser = PacketParser(
+            max_length=self._parser.max_length,
+            check=BlockCheck.CRC16,
+            init_check=BlockCheck.CRC16,
+        )
+        parser.receive_data(event.raw)
+        got = parser.next_event()
+        if not isinstance(got, PacketReceived):
+            return None
+        self._init_check = BlockCheck.CRC16
+        self._parser.init_check = self._parser.check = BlockCheck.CRC16
+        return got
 
     def handle_timer(self, now: float) -> None:
         """Call at :meth:`get_timer`'s time: resend or NAK, or give up."""
@@ -460,7 +492,7 @@ class KermitSide(abc.ABC):
         """Append a packet to the output; returns its wire bytes."""
         neg = self._neg
         if neg is None or init:
-            wire = build_packet(packet, BlockCheck.SUM6, eol=CR)
+            wire = build_packet(packet, self._init_check, eol=CR)
         else:
             wire = build_packet(packet, neg.check, eol=neg.eol, padding=neg.padding)
         self._out += wire

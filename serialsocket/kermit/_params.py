@@ -108,6 +108,9 @@ class KermitConfig:
         seven_bit: the line carries 7 bits only: ask for 8th-bit prefixing.
         repeat: offer repeat-count compression (``~``).
         attributes: offer attribute (A) packets (size, type, date, disposition).
+        force3: FORCE-3 (C-Kermit's SET BLOCK-CHECK 5): CHKT ``5`` and a
+            CRC-16 on every packet, S and its ACK included.  A receiver
+            answers a FORCE-3 S this way whatever this says.
         recovery: offer the RESEND capability (CAPAS 16); a receiver then
             answers a RESEND with the bytes it already holds.
         resend: the sender asks, for each file, how much the receiver holds
@@ -133,6 +136,7 @@ class KermitConfig:
     delay: float = 0.0
     rate: int | None = None
     dynamic_length: bool = True
+    force3: bool = False
     recovery: bool = True
     resend: bool = False
     text: bool = False
@@ -193,6 +197,7 @@ class KermitInit:
     attributes: bool
     window: int
     recovery: bool = False
+    force3: bool = False
 
     @classmethod
     def mine(cls, config: KermitConfig) -> KermitInit:
@@ -213,6 +218,7 @@ class KermitInit:
             attributes=config.attributes,
             window=config.window,
             recovery=config.recovery and config.attributes,
+            force3=config.force3,
         )
 
     def encode(self) -> bytes:
@@ -233,7 +239,7 @@ class KermitInit:
                 tochar(self.eol),
                 self.qctl,
                 self.qbin,
-                ord(str(int(self.check))),
+                ord("5") if self.force3 else ord(str(int(self.check))),
                 self.rept if self.rept is not None else 32,
                 tochar(caps),
                 tochar(self.window),
@@ -288,6 +294,7 @@ class KermitInit:
             attributes=caps >= 0 and bool(caps & _CAP_ATTRIBUTES),
             window=common.window,
             recovery=caps >= 0 and bool(caps & _CAP_RESEND),
+            force3=common.force_check,
         )
 
 
@@ -336,6 +343,10 @@ def negotiate_kermit(
             peer refuses it, or the peer's prefixes collide.
     """
     check = mine.check if mine.check == theirs.check else BlockCheck.SUM6
+    if mine.force3 or theirs.force3:
+        # FORCE-3 ('5') with '3' or '5': CRC-16 on everything (C-Kermit's bctf).
+        crc = BlockCheck.CRC16
+        check = crc if mine.check is crc and theirs.check is crc else BlockCheck.SUM6
     qbin: int | None = None
     for want, other in ((mine.qbin, theirs.qbin), (theirs.qbin, mine.qbin)):
         if want not in b"YN" and (other == ord("Y") or other == want):

@@ -382,3 +382,28 @@ def test_receiver_refuses_a_text_resend() -> None:
     assert field == b'"#AMJ!!11!5+!R@ '
     receiver.receive_data(_packet(2, "A", field), 0.3)  # literal, as C-Kermit sends it
     assert receiver.data_to_send() == _packet(2, "Y", b"N+")
+
+
+# -- FORCE-3 ------------------------------------------------------------------------------------
+
+
+def test_force3_puts_a_crc_on_the_send_init_and_a_plain_receiver_follows() -> None:
+    data = _payload(5000)
+    sender = KermitSender(
+        [OutgoingFile("f", len(data), io.BytesIO(data))], KermitConfig(force3=True), 0.0
+    )
+    s_wire = sender.data_to_send()
+    init = KermitInit.mine(KermitConfig(force3=True)).encode()
+    assert init[7:8] == b"5"
+    assert s_wire == build_packet(Packet(seq=0, type="S", data=init), BlockCheck.CRC16)
+    receiver = KermitReceiver(KermitConfig(), 0.0)
+    receiver.receive_data(s_wire, 0.1)
+    ack = receiver.data_to_send()
+    mine = KermitInit.mine(KermitConfig()).encode()
+    assert ack == build_packet(Packet(seq=0, type="Y", data=mine), BlockCheck.CRC16)
+    assert receiver.statistics().damaged == 0
+    sender.receive_data(ack, 0.2)
+    got, _, r_events, _ = _simulate(sender, receiver)
+    assert got == data
+    assert r_events[-1] == TransferComplete()
+    assert sender.statistics().check is BlockCheck.CRC16

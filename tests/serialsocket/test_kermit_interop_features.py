@@ -170,3 +170,28 @@ def test_the_date_attribute_sets_the_modification_time(
     setup = TransferSetup(sender=sender, receiver=receiver, window=8, limit=60)
     run_transfer(setup, [path], out)
     assert (out / "dated.bin").stat().st_mtime == when
+
+
+# -- FORCE-3 ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("sender", "receiver"), [("ours", "ckermit"), ("ckermit", "ours")])
+def test_force3_with_c_kermit(tmp_path: pathlib.Path, sender: str, receiver: str) -> None:
+    """C-Kermit's SET BLOCK-CHECK 5 on its side, ours --check 5 as sender: a
+    CRC-16 on every packet, S and its ACK included."""
+    _need("ckermit")
+    src, out = _dirs(tmp_path)
+    path = src / "f3.bin"
+    path.write_bytes(random.Random(3).randbytes(20_000))
+    setup = TransferSetup(
+        sender=sender,
+        receiver=receiver,
+        window=8,
+        force3=sender == "ours",
+        extra_ckermit=("set block-check 5",),
+        limit=60,
+    )
+    result = run_transfer(setup, [path], out)
+    assert result.ours is not None
+    assert result.ours.check == 3
+    assert result.ours.damaged == 0  # the CRC-checked S was read, not rejected
