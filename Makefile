@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed-stamp
 RUN_STAMP := $(VENV)/.installed-run-stamp
 PKGS   := serialsocket tcpstream linksim
 
-.PHONY: demo test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
+.PHONY: demo docs test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
 
 $(RUN_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,18 @@ $(STAMP): $(RUN_STAMP)
 
 demo: $(RUN_STAMP)
 	$(PY) -m linksim demo $(ARGS)
+
+# The API reference with the README's tour and the protocol documents, built
+# into build/site (open build/site/index.html).  The build itself needs no
+# network; any warning fails it (mkdocs.yml: strict).
+DOCS_STAMP := $(VENV)/.installed-docs-stamp
+
+$(DOCS_STAMP): $(RUN_STAMP)
+	$(PY) -m pip install --quiet -e '.[docs]'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/mkdocs build --strict
 
 test: lint typecheck pytest
 
