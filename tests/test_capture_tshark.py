@@ -143,6 +143,10 @@ def test_a_serial_socket_session(tmp_path: pathlib.Path) -> None:
     # ACKs carry the cumulative next-expected and the window.
     ack = next(r for r in rows if r["telelink.type"] == "Y" and r["telelink.seq"] == "1")
     assert (ack["telelink.ack.next"], ack["telelink.ack.window"]) == ("2", "31")
+    # The summary line: the interface, the direction and each packet.
+    summary = tshark(path, home=tmp_path).splitlines()
+    assert summary[0].endswith("telelink 34 client tx I 0")
+    assert any(line.endswith("client rx Y 1 next=2 win=31") for line in summary)
 
 
 def serial_line_capture(path: pathlib.Path) -> dict[str, bytes]:

@@ -159,6 +159,21 @@ local frame_direction = Field.new("frame.packet_flags_direction")
 
 -- Per interface and direction: bytes of a packet not finished yet (first pass),
 -- and per frame the bytes carried into it (so a re-dissection is the same).
+local frame_interface_name = Field.new("frame.interface_name")
+
+-- "NAME tx " / "NAME rx ": which port or connection, and which way (captures
+-- from the relay have two ports, from the arm server one per connection).
+local function direction_prefix()
+    local name, dir = frame_interface_name(), frame_direction()
+    local text = name and (tostring(name.value) .. " ") or ""
+    if dir and dir.value == 1 then
+        text = text .. "rx "
+    elseif dir and dir.value == 2 then
+        text = text .. "tx "
+    end
+    return text
+end
+
 local function stream_carry(name)
     local state = { pending = {}, into = {} }
     function state.key()
@@ -462,9 +477,7 @@ function tl.dissector(tvb, pinfo, tree)
     flush_noise(math.min(pos, keep_from))
     serial_carry.keep(buf, keep_from, pinfo)
     if keep_from < n then table.insert(summary, "(" .. (n - keep_from) .. "B carried)") end
-    local dir = frame_direction()
-    local arrow = ""
-    if dir and dir.value == 1 then arrow = "rx " elseif dir and dir.value == 2 then arrow = "tx " end
+    local arrow = direction_prefix()
     if #summary == 0 then summary = { "EOL" } end
     pinfo.cols.info:set(arrow .. table.concat(summary, ", "))
     return n - carried
@@ -627,9 +640,7 @@ function tc.dissector(tvb, pinfo, tree)
     end
     stream_carry_cmd.keep(buf, off, pinfo)
     if off < n then table.insert(summary, "(" .. (n - off) .. "B carried)") end
-    local dir = frame_direction()
-    local arrow = ""
-    if dir and dir.value == 1 then arrow = "rx " elseif dir and dir.value == 2 then arrow = "tx " end
+    local arrow = direction_prefix()
     pinfo.cols.info:set(arrow .. table.concat(summary, ", "))
     return n - carried
 end
