@@ -1,4 +1,4 @@
-"""Kermit data-field prefix encoding, vectorised with numpy.
+"""Kermit data-field prefix encoding, vectorised with numpy and ``bytes`` tricks.
 
 Theory of operation
 -------------------
@@ -13,20 +13,36 @@ a control character (low 7 bits < 32 or = 127) gets QCTL and is sent as
 QCTL and is sent as itself.
 
 *Encoding* is a table lookup: every byte value has a fixed token of 1..3
-characters, so a whole buffer is encoded with a few array operations (token
-lengths, a cumulative sum for output offsets, and up to three scatters).  Runs
-are found with one comparison of the buffer against itself shifted by one.
+characters, stored zero-padded in one machine word.  A buffer is encoded by
+gathering the words (``ndarray.take``) and deleting the padding with
+``bytes.translate(None, b"\\0")``, which runs at memory speed; zero never
+occurs inside a token (NUL is always control-prefixed).  Runs of three or more
+equal bytes are found with one comparison of the buffer against itself shifted
+by one; the few runs of ordinary data are spliced in as repeat tokens.
 
 *Decoding* is harder because a character's role depends on what came before
 (``##`` is a literal ``#``; ``~#`` is a repeat count of 3).  The roles follow a
 five-state machine (see ``_T`` below) whose state only changes inside chains of
 prefix characters; after any ordinary character the state is back at "token
-start" (unless that character was a repeat count).  So we guess that every
-character starts in "token start", then repeatedly recompute only the positions
-whose predecessor's state differs from the guess.  Real data converges in a few
-rounds; an adversarial field such as ``####...`` would need one round per
-character, so after ``_MAX_ROUNDS`` we switch to the sequential decoder, which
-is the reference implementation and is exact for every input.
+start" (unless that character was a repeat count).
+
+* Short fields (one packet's data field) are split with one regular
+  expression whose alternatives are exactly the machine's prefixed tokens
+  (``re.split`` with a capturing group: ordinary characters between tokens
+  come out as runs), and each prefixed token is looked up in a table.
+* Long fields (a window of packets decoded together) guess that every
+  character starts in "token start", then repeatedly recompute only the
+  positions whose predecessor's state differs from the guess.  Real data
+  converges in a few rounds; an adversarial field such as ``####...`` would
+  need one round per character, so after ``_MAX_ROUNDS`` we switch to the
+  short-field decoder, which is exact for every input.  Once the states are
+  known, every output byte is computed in place (XOR 64 after QCTL, OR 128
+  after QBIN) and the literals are compressed out in one pass.
+
+:func:`_reference_encode`, :func:`_reference_encode_prefix` and
+:func:`_reference_decode` are the plain one-token-at-a-time definitions
+(gkermit.c order); the tests check the fast paths against them for every
+profile.
 
 The decoder accepts what real Kermit peers send: raw 8-bit bytes when 8th-bit
 prefixing is off, unprefixed control characters (C-Kermit leaves several C0
@@ -37,8 +53,11 @@ interpret: a field that ends inside a token, or a repeat count outside 1..94.
 
 from __future__ import annotations
 
+import bisect
 import functools
+import re
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -59,14 +78,18 @@ _MAX_RUN = 94
 _MIN_RUN = 3
 """Runs of two are sent twice: ``~"X`` would be longer than ``XX``."""
 
-_SEQUENTIAL_BELOW = 640
-"""Fields shorter than this decode faster one token at a time: the vectorised
-path has a fixed cost of ~60 us, the sequential one ~0.12 us per character of
-random binary (measured on the 2-core reference machine; the two cross at
-600-700 characters)."""
+_VECTOR_FROM = 2048
+"""Fields at least this long decode with the vectorised path: it has a fixed
+cost of ~40 us (some twenty numpy calls), the regular-expression path ~45 ns
+per character of random binary (measured on the 2-core reference machine; the
+two cross near 1-2 KiB)."""
+
+_SPLICE_RUNS_PER = 1024
+"""Encode runs one by one (a Python loop) while there are at most one per this
+many bytes, as in ordinary data; denser runs take the all-numpy path."""
 
 _MAX_ROUNDS = 32
-"""Fixed-point rounds before the decoder falls back to the sequential path.
+"""Fixed-point rounds before the decoder falls back to the short-field path.
 
 Real encoders never chain more than four prefix characters, so valid data
 converges within a handful of rounds; the bound only matters for hostile input."""
@@ -75,13 +98,12 @@ converges within a handful of rounds; the bound only matters for hostile input."
 _OTHER, _C_REPT, _C_QBIN, _C_QCTL = 0, 1, 2, 3
 # Decoder states: before a token, after REPT, after the count, after QBIN, after QCTL.
 _S0, _COUNT, _AFTER_COUNT, _AFTER_QBIN, _AFTER_QCTL = 0, 1, 2, 3, 4
-# Roles of a character in its token.
-_LIT, _REPT, _CNT, _QBIN, _QCTL = 0, 1, 2, 3, 4
 
 # _T[state, class] -> next state.  Rows: S0, COUNT, AFTER_COUNT, AFTER_QBIN, AFTER_QCTL.
 # Columns: other, REPT char, QBIN char, QCTL char.  This mirrors gkermit.c decode():
 # after REPT the next char is always the count; after the count only QBIN/QCTL are
 # prefixes; after QBIN only QCTL is; after QCTL the next char is always literal.
+# A character is a literal exactly when the state after it is S0.
 _T = np.array(
     [
         [_S0, _COUNT, _AFTER_QBIN, _AFTER_QCTL],
@@ -92,32 +114,37 @@ _T = np.array(
     ],
     dtype=np.int8,
 )
-_R = np.array(
-    [
-        [_LIT, _REPT, _QBIN, _QCTL],
-        [_CNT, _CNT, _CNT, _CNT],
-        [_LIT, _LIT, _QBIN, _QCTL],
-        [_LIT, _LIT, _LIT, _QCTL],
-        [_LIT, _LIT, _LIT, _LIT],
-    ],
-    dtype=np.int8,
-)
 
 _T_FLAT = _T.ravel()
 """Row-major flattening: ``_T_FLAT[state * 4 + class]`` is a 1-D gather."""
 _T_TRANS = _T_FLAT.tobytes().ljust(256, b"\0")
-_R_TRANS = _R.ravel().tobytes().ljust(256, b"\0")
-"""The same tables as ``bytes.translate`` tables (indices 0..19 used)."""
+"""The same table as a ``bytes.translate`` table (indices 0..19 used)."""
+
+_CTL_RANGE = bytes(64 if 63 <= (c & 0x7F) <= 95 else 0 for c in range(256))
+"""``translate`` table: 64 where ``ctl()`` applies after QCTL ('?'..'_', either half)."""
 
 
-def _lookup(table: bytes, index: npt.NDArray[np.int8]) -> bytes:
+def _lookup(table: bytes, index: npt.NDArray[np.int8]) -> npt.NDArray[np.int8]:
     """``table[index]`` element-wise, through ``bytes.translate``."""
-    return index.tobytes().translate(table)
+    return np.frombuffer(index.tobytes().translate(table), np.int8)
 
 
 def _legal_prefix(c: int) -> bool:
     """Kermit allows prefix characters 33..62 and 96..126 (ckcfns.c spar)."""
     return 33 <= c <= 62 or 96 <= c <= 126
+
+
+def _dangling() -> MalformedDataError:
+    return MalformedDataError(
+        "data field ends inside a prefix sequence",
+        error_hint="Malformed data field (dangling prefix)",
+    )
+
+
+def _bad_count() -> MalformedDataError:
+    return MalformedDataError(
+        "repeat count outside 1..94", error_hint="Malformed data field (repeat count)"
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,9 +193,27 @@ class Encoding:
         arr = np.frombuffer(data, dtype=np.uint8)
         if arr.size == 0:
             return b""
-        units, counts = self._units(arr)
-        out, _ = self._emit(units, counts, None)
-        return out
+        tok = _token_table(self.qctl, self.qbin, self.rept)
+        runs = self._runs(arr)
+        if runs is None:
+            return tok.packed.take(arr).tobytes().translate(None, b"\0")
+        run_start, run_len = runs
+        if run_start.size * _SPLICE_RUNS_PER > arr.size:
+            units, counts = self._split_runs(arr, run_start, run_len)
+            out, _ = self._emit(units, counts, None)
+            return out
+        # Few runs (ordinary data): encode the stretches between them whole and
+        # write each run's tokens directly.
+        assert self.rept is not None
+        packed, tokens = tok.packed, tok.tokens
+        parts: list[bytes] = []
+        prev = 0
+        for s, n in zip(run_start.tolist(), run_len.tolist(), strict=True):
+            parts.append(packed.take(arr[prev:s]).tobytes())
+            parts.append(_run_tokens(self.rept, tokens[arr[s]], n))
+            prev = s + n
+        parts.append(packed.take(arr[prev:]).tobytes())
+        return b"".join(parts).translate(None, b"\0")
 
     def encode_prefix(
         self, data: bytes | bytearray | memoryview, capacity: int
@@ -246,7 +291,7 @@ class Encoding:
         while True:
             arr = np.frombuffer(view[:span], dtype=np.uint8)
             units, counts = self._units(arr)
-            lens = tok.width[units].astype(np.int64)
+            lens = tok.width.take(units).astype(np.int64)
             if counts is not None:
                 lens += 2 * (counts >= _MIN_RUN)
             ends = np.cumsum(lens)
@@ -254,42 +299,64 @@ class Encoding:
                 break
             span *= 4
         flat, _ = self._emit(units, counts, None)
-        src_ends = np.cumsum(counts) if counts is not None else np.arange(1, units.size + 1)
+        # Each field ends at the last token that fits: a binary search per
+        # field (a few dozen searches; a numpy call each would cost more).
+        # (A memoryview of the int64 array: bisect reads it without converting
+        # thousands of elements to Python ints first.)
+        char_ends = ends.data
+        src_ends = None if counts is None else np.cumsum(counts).data
+        n_units = len(char_ends)
         fields: list[tuple[bytes, int]] = []
         char_base = unit_base = src_base = 0
-        while len(fields) < count and unit_base < units.size:
-            cut = int(np.searchsorted(ends, char_base + capacity, side="right"))
-            if cut == units.size and len(fields) == count - 1 and len(view) > len(arr):
+        while len(fields) < count and unit_base < n_units:
+            cut = bisect.bisect_right(char_ends, char_base + capacity, unit_base)
+            if cut == n_units and len(fields) == count - 1 and len(view) > len(arr):
                 # The last field may want more source than the slice held.
                 field, used = self.encode_prefix(view[src_base:], capacity)
                 fields.append((field, used))
                 return fields
-            char_end = int(ends[cut - 1])
-            src_end = int(src_ends[cut - 1])
+            char_end = char_ends[cut - 1]
+            src_end = cut if src_ends is None else src_ends[cut - 1]
             fields.append((flat[char_base:char_end], src_end - src_base))
             char_base, unit_base, src_base = char_end, cut, src_end
         if len(fields) < count and src_base < len(view):
             fields.extend(self.encode_fields(view[src_base:], capacity, count - len(fields)))
         return fields
 
-    def _units(self, arr: U8) -> tuple[U8, I64 | None]:
-        """Split a buffer into tokens: (byte values, repeat counts or None).
+    def _runs(self, arr: U8) -> tuple[I64, I64] | None:
+        """Maximal runs of at least three equal bytes: (starts, lengths), or None.
 
-        Only runs of three or more are touched; every other byte stays its own
-        token, so data without long runs costs two comparisons.
+        ``arr[t] == arr[t+1] == arr[t+2]`` marks a triple; the triples of one
+        run are consecutive positions, and those of two runs are at least three
+        apart, so runs are the groups of consecutive triple positions.
+        """
+        if self.rept is None or arr.size < _MIN_RUN:
+            return None
+        same = arr[1:] == arr[:-1]
+        triple = same[1:] & same[:-1]
+        if not triple.any():
+            return None
+        at = np.flatnonzero(triple)
+        breaks = np.flatnonzero(np.diff(at) != 1)
+        first = at[np.concatenate(([0], breaks + 1))]
+        last = at[np.concatenate((breaks, [at.size - 1]))]
+        return first, last - first + _MIN_RUN
+
+    def _units(self, arr: U8) -> tuple[U8, I64 | None]:
+        """Split a buffer into tokens: (byte values, repeat counts or None)."""
+        runs = self._runs(arr)
+        if runs is None:
+            return arr, None
+        return self._split_runs(arr, *runs)
+
+    @staticmethod
+    def _split_runs(arr: U8, run_start: I64, run_len: I64) -> tuple[U8, I64]:
+        """Tokens of a buffer whose runs are known: one unit per byte outside
+        the runs, one per repeat token inside (94 bytes each, then the rest).
         """
         n = arr.size
-        if self.rept is None or n < _MIN_RUN:
-            return arr, None
-        same = arr[1:] == arr[:-1]
-        if not bool(np.any(same[1:] & same[:-1])):
-            return arr, None
-        starts = np.flatnonzero(np.concatenate(([True], ~same)))
-        lengths = np.diff(np.append(starts, n))
-        is_long = lengths >= _MIN_RUN
-        run_start, run_len = starts[is_long], lengths[is_long]
         full, rest = np.divmod(run_len, _MAX_RUN)
-        # Drop every byte inside a long run, then re-admit one representative
+        # Drop every byte inside a run, then re-admit one representative
         # byte per token: one per full 94-byte chunk, one for a tail of 3..93,
         # or the tail's one or two bytes themselves.
         edge = np.zeros(n + 1, dtype=np.int32)
@@ -314,16 +381,15 @@ class Encoding:
     def _emit(self, units: U8, counts: I64 | None, capacity: int | None) -> tuple[bytes, int]:
         """Write tokens; with a capacity, only the longest prefix that fits.
 
-        Tokens are laid out in a zero-padded grid, one row per token, and the
-        padding is squeezed out.  Zero never occurs inside a token (NUL is
-        always control-prefixed), so the squeeze is exact.
+        Tokens are gathered zero-padded, one machine word each, and the padding
+        is deleted.  Zero never occurs inside a token (NUL is always
+        control-prefixed) nor in a repeat prefix, so the squeeze is exact.
         """
         tok = _token_table(self.qctl, self.qbin, self.rept)
-        tok_len = tok.width
         rep = None if counts is None else counts >= _MIN_RUN
         n_units = units.size
         if capacity is not None:
-            lens = tok_len[units].astype(np.int32)
+            lens = tok.width.take(units).astype(np.int32)
             if rep is not None:
                 lens += 2 * rep
             ends = np.cumsum(lens)
@@ -334,17 +400,17 @@ class Encoding:
                     rep, counts = rep[:n_units], counts[:n_units]
         if n_units == 0:
             return b"", 0
+        grid: npt.NDArray[np.unsignedinteger[Any]]
         if rep is None or counts is None or self.rept is None or not rep.any():
-            grid = tok.packed32[units].view(np.uint8)
+            grid = tok.packed.take(units)
         else:
             # Little-endian 8-byte rows: REPT, count, then the token's three bytes.
-            rows = tok.packed64[units]
+            grid = tok.packed64.take(units)
             prefix = np.uint64(self.rept) | (
                 counts[rep].astype(np.uint64) + np.uint64(32)
             ) << np.uint64(8)
-            rows[rep] |= prefix
-            grid = rows.view(np.uint8)
-        return grid[grid != 0].tobytes(), n_units
+            grid[rep] |= prefix
+        return grid.tobytes().translate(None, b"\0"), n_units
 
     # -- decoding ---------------------------------------------------------------
 
@@ -355,21 +421,44 @@ class Encoding:
             MalformedDataError: the field ends inside a token or carries a
                 repeat count outside 1..94.
         """
-        raw_field = bytes(field)
-        if len(raw_field) < _SEQUENTIAL_BELOW:
-            return self._decode_sequential(raw_field)
-        arr = np.frombuffer(raw_field, dtype=np.uint8)
+        raw = bytes(field)
+        if len(raw) < _VECTOR_FROM:
+            return self._decode_split(raw)
+        return self._decode_vector(raw)
+
+    def _decode_split(self, raw: bytes) -> bytes:
+        """Short fields: tokenise with one regular expression, look tokens up."""
+        table = _split_table(self.qctl, self.qbin, self.rept)
+        parts = table.pattern.split(raw)
+        if len(parts) == 1:
+            if table.prefix.search(raw) is not None:
+                raise _dangling()
+            return raw
+        # A prefix character outside every token can only be one that ran out
+        # of field (every prefixed token is at most 5 characters, so a failed
+        # match is within the last 4): check the last few ordinary runs.
+        search = table.prefix.search
+        for plain in parts[-7::2]:
+            if search(plain) is not None:
+                raise _dangling()
+        parts[1::2] = map(table.tokens.__getitem__, parts[1::2])
+        return b"".join(parts)
+
+    def _decode_vector(self, raw: bytes) -> bytes:
+        """Long fields: all positions at once (see the module docstring)."""
+        arr = np.frombuffer(raw, dtype=np.uint8)
         n = arr.size
         # All small-table lookups go through bytes.translate: it runs at memory
         # speed, several times faster than numpy fancy indexing on int8 tables.
-        cls = np.frombuffer(
-            raw_field.translate(_class_table(self.qctl, self.qbin, self.rept)), np.int8
-        )
-        st = np.zeros(n, dtype=np.int8)
-        # Round 0 guesses "token start" everywhere; round 1 redoes every position
-        # at once; later rounds touch only positions whose predecessor changed.
-        st[1:] = np.frombuffer(_lookup(_T_TRANS, cls[:-1]), np.int8)
-        new = np.frombuffer(_lookup(_T_TRANS, st[:-1] * 4 + cls[:-1]), np.int8)
+        cls_table, start_table = _class_table(self.qctl, self.qbin, self.rept)
+        cls = np.frombuffer(raw.translate(cls_table), np.int8)
+        # st[i] is the state before character i.  Round 0 guesses "token start"
+        # everywhere; round 1 redoes every position at once; later rounds touch
+        # only positions whose predecessor changed.
+        st = np.empty(n, dtype=np.int8)
+        st[0] = _S0
+        st[1:] = np.frombuffer(raw.translate(start_table), np.int8)[:-1]
+        new = _lookup(_T_TRANS, st[:-1] * 4 + cls[:-1])
         changed = np.flatnonzero(new != st[1:]) + 1
         st[1:] = new
         pending = changed[changed < n - 1] + 1
@@ -377,145 +466,268 @@ class Encoding:
         while pending.size:
             rounds += 1
             if rounds > _MAX_ROUNDS:
-                return self._decode_sequential(raw_field)
+                return self._decode_split(raw)
             new = _T_FLAT[st[pending - 1] * 4 + cls[pending - 1]]
             changed = pending[new != st[pending]]
             st[pending] = new
             pending = changed[changed < n - 1] + 1
         if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
-            raise MalformedDataError(
-                "data field ends inside a prefix sequence",
-                error_hint="Malformed data field (dangling prefix)",
-            )
-        role = np.frombuffer(_lookup(_R_TRANS, st * 4 + cls), np.int8)
-        lit = np.flatnonzero(role == _LIT)
-        values = arr[lit].copy()
-        lit_state = st[lit]
-        escaped = lit_state == _AFTER_QCTL
-        low = values & 0x7F
-        values[escaped & (low >= 63) & (low <= 95)] ^= 64
-        # Walk back from each literal over its QCTL and QBIN to find the token's prefixes.
-        at = lit - escaped
-        prev_state = st[at]
-        has_qbin = prev_state == _AFTER_QBIN
-        values[has_qbin] |= 0x80
-        at = at - has_qbin
-        has_count = st[at] == _AFTER_COUNT
-        if not has_count.any():
-            return values.tobytes()
-        counts = np.ones(values.size, dtype=np.int64)
-        raw = arr[at[has_count] - 1].astype(np.int64) - 32
-        if raw.min() < 1 or raw.max() > _MAX_RUN:
-            raise MalformedDataError(
-                "repeat count outside 1..94", error_hint="Malformed data field (repeat count)"
-            )
-        counts[has_count] = raw
-        return np.repeat(values, counts).tobytes()
+            raise _dangling()
+        # Every output byte in place: the character, ctl()'d after QCTL, with
+        # bit 7 set when its token had QBIN (just before it, or before its QCTL).
+        after_qctl = st == _AFTER_QCTL
+        after_qbin = st == _AFTER_QBIN
+        qbin = after_qbin
+        qbin[1:] |= after_qctl[1:] & after_qbin[:-1]
+        flip = np.frombuffer(raw.translate(_CTL_RANGE), np.uint8) * after_qctl
+        value = (arr ^ flip) | (qbin.view(np.uint8) << 7)
+        literal = np.empty(n, dtype=np.bool_)
+        literal[:-1] = st[1:] == _S0
+        literal[-1] = True
+        count_at = np.flatnonzero(st == _COUNT)
+        if count_at.size == 0:
+            return np.compress(literal, value).tobytes()
+        counts = arr[count_at].astype(np.int64) - 32
+        if counts.min() < 1 or counts.max() > _MAX_RUN:
+            raise _bad_count()
+        # Each count belongs to the first literal after it (at most 3 further on).
+        if count_at.size * _SPLICE_RUNS_PER <= n:
+            # Few runs: compress the stretches between them, splice the runs in.
+            parts: list[bytes] = []
+            prev = 0
+            for at, count in zip(count_at.tolist(), counts.tolist(), strict=True):
+                lit = at + 1 + int(np.argmax(literal[at + 1 : at + 5]))
+                parts.append(np.compress(literal[prev:at], value[prev:at]).tobytes())
+                parts.append(bytes((int(value[lit]),)) * count)
+                prev = lit + 1
+            parts.append(np.compress(literal[prev:], value[prev:]).tobytes())
+            return b"".join(parts)
+        lit_at = np.flatnonzero(literal)
+        reps = np.ones(lit_at.size, dtype=np.int64)
+        reps[np.searchsorted(lit_at, count_at, side="right")] = counts
+        return np.repeat(value.take(lit_at), reps).tobytes()
 
     def _decode_sequential(self, field: bytes) -> bytes:
-        """Reference decoder, one token at a time (gkermit.c decode order).
+        """The reference decoder (:func:`_reference_decode`); kept for the fuzzers."""
+        return _reference_decode(self, field)
 
-        Plain characters (most of any field) take one comparison chain and an
-        ``append``; only prefixed tokens go through the full decode.
-        """
-        out = bytearray()
-        append = out.append
-        rept, qbin, qctl = self.rept, self.qbin, self.qctl
-        i, n = 0, len(field)
-        dangling = MalformedDataError(
-            "data field ends inside a prefix sequence",
-            error_hint="Malformed data field (dangling prefix)",
-        )
-        while i < n:
-            c = field[i]
-            i += 1
-            if c != rept and c != qbin and c != qctl:
-                append(c)
-                continue
-            count = 1
-            if c == rept:
-                if i + 1 >= n:
-                    raise dangling
-                count = field[i] - 32
-                if not 1 <= count <= _MAX_RUN:
-                    raise MalformedDataError(
-                        "repeat count outside 1..94",
-                        error_hint="Malformed data field (repeat count)",
-                    )
-                c = field[i + 1]
-                i += 2
-            high = 0
-            if c == qbin:
-                if i >= n:
-                    raise dangling
-                high = 0x80
-                c = field[i]
-                i += 1
-            if c == qctl:
-                if i >= n:
-                    raise dangling
-                c = field[i]
-                i += 1
-                if 63 <= (c & 0x7F) <= 95:
-                    c ^= 64
-            if count == 1:
-                append(c | high)
-            else:
-                out += bytes((c | high,)) * count
-        return bytes(out)
+
+def _run_tokens(rept: int, token: bytes, n: int) -> bytes:
+    """The repeat tokens of a run of ``n`` >= 3 bytes whose own token is ``token``."""
+    full, rest = divmod(n, _MAX_RUN)
+    out = (bytes((rept, _MAX_RUN + 32)) + token) * full
+    if rest >= _MIN_RUN:
+        return out + bytes((rept, rest + 32)) + token
+    return out + token * rest
 
 
 @dataclass(frozen=True, slots=True)
 class _TokenTable:
     """Every byte value's token, zero-padded and packed little-endian.
 
-    ``packed32`` holds the token in bytes 0..2; ``packed64`` holds it in bytes
-    2..4, leaving bytes 0..1 free for a repeat prefix and count.
+    ``packed`` holds the token in its low bytes (uint16 when no token is
+    longer than two characters, else uint32); ``packed64`` holds it in bytes
+    2..4, leaving bytes 0..1 free for a repeat prefix and count; ``tokens``
+    are the same as ``bytes``.
     """
 
     width: U8
-    packed32: npt.NDArray[np.uint32]
+    packed: npt.NDArray[np.uint16] | npt.NDArray[np.uint32]
     packed64: npt.NDArray[np.uint64]
+    tokens: tuple[bytes, ...]
+
+
+def _token(b: int, qctl: int, qbin: int | None, specials: set[int]) -> bytes:
+    """The token of one byte value (reference/kermit.md section 3, steps 2-4)."""
+    chars: list[int] = []
+    c = b
+    if qbin is not None and c & 0x80:
+        chars.append(qbin)
+        c &= 0x7F
+    low = c & 0x7F
+    if low < 32 or low == 127:
+        chars += [qctl, c ^ 64]
+    elif low in specials:
+        chars += [qctl, c]
+    else:
+        chars.append(c)
+    return bytes(chars)
 
 
 @functools.lru_cache(maxsize=16)
 def _token_table(qctl: int, qbin: int | None, rept: int | None) -> _TokenTable:
     """Build the token table of one prefix profile (cached: profiles are few)."""
-    tok = np.zeros((256, 4), dtype=np.uint8)
-    width = np.zeros(256, dtype=np.uint8)
     specials = {c for c in (qctl, qbin, rept) if c is not None}
-    for b in range(256):
-        chars: list[int] = []
-        c = b
-        if qbin is not None and c & 0x80:
-            chars.append(qbin)
-            c &= 0x7F
-        low = c & 0x7F
-        if low < 32 or low == 127:
-            chars += [qctl, c ^ 64]
-        elif low in specials:
-            chars += [qctl, c]
-        else:
-            chars.append(c)
-        tok[b, : len(chars)] = chars
-        width[b] = len(chars)
-    packed32 = tok.view("<u4").reshape(256).astype(np.uint32)
-    packed64 = packed32.astype(np.uint64) << np.uint64(16)
-    for arr in (width, packed32, packed64):
+    tokens = tuple(_token(b, qctl, qbin, specials) for b in range(256))
+    width = np.array([len(t) for t in tokens], dtype=np.uint8)
+    words = np.array([int.from_bytes(t, "little") for t in tokens], dtype=np.uint32)
+    packed: npt.NDArray[np.uint16] | npt.NDArray[np.uint32]
+    packed = words.astype(np.uint16) if int(width.max()) <= 2 else words
+    packed64 = words.astype(np.uint64) << np.uint64(16)
+    for arr in (width, packed, packed64):
         arr.setflags(write=False)
-    return _TokenTable(width, packed32, packed64)
+    return _TokenTable(width, packed, packed64, tokens)
 
 
 @functools.lru_cache(maxsize=16)
-def _class_table(qctl: int, qbin: int | None, rept: int | None) -> bytes:
-    """Decoder character classes as a translate table; prefixes match the full byte."""
+def _class_table(qctl: int, qbin: int | None, rept: int | None) -> tuple[bytes, bytes]:
+    """Two translate tables: the decoder class of each character (prefixes match
+    the full byte), and the state after it when it starts a token."""
     cls = bytearray(256)
     cls[qctl] = _C_QCTL
     if qbin is not None:
         cls[qbin] = _C_QBIN
     if rept is not None:
         cls[rept] = _C_REPT
-    return bytes(cls)
+    return bytes(cls), bytes(cls).translate(_T_TRANS)
+
+
+class _TokenDict(dict[bytes, bytes]):
+    """Decoded value of every prefixed token without a repeat count; tokens with
+    one (rare: runs) are decoded on demand and not kept, so the table stays
+    bounded whatever a peer sends."""
+
+    __slots__ = ("rept",)
+
+    def __init__(self, rept: int | None) -> None:
+        super().__init__()
+        self.rept = rept
+
+    def __missing__(self, token: bytes) -> bytes:
+        # Only REPT count ... reaches here: every other token is in the table.
+        count = token[1] - 32
+        if not 1 <= count <= _MAX_RUN:
+            raise _bad_count()
+        rest = token[2:]
+        return (self[rest] if len(rest) > 1 else rest) * count
+
+
+@dataclass(frozen=True, slots=True)
+class _SplitTable:
+    """The short-field decoder of one profile.
+
+    ``pattern`` matches one prefixed token exactly as the state machine reads
+    it (``_T``): ``QCTL any``; ``QBIN (QCTL any | not-QCTL)``;
+    ``REPT any (QBIN (QCTL any | not-QCTL) | QCTL any | not-QBIN-or-QCTL)``.
+    ``prefix`` finds any prefix character.
+    """
+
+    pattern: re.Pattern[bytes]
+    prefix: re.Pattern[bytes]
+    tokens: _TokenDict
+
+
+@functools.lru_cache(maxsize=16)
+def _split_table(qctl: int, qbin: int | None, rept: int | None) -> _SplitTable:
+    q = re.escape(bytes((qctl,)))
+    alts = [q + b"."]
+    after_count = [q + b"."]
+    plain_after_count = q
+    if qbin is not None:
+        b = re.escape(bytes((qbin,)))
+        qbin_token = b + b"(?:" + q + b".|[^" + q + b"])"
+        alts.append(qbin_token)
+        after_count.append(qbin_token)
+        plain_after_count += b
+    if rept is not None:
+        r = re.escape(bytes((rept,)))
+        after_count.append(b"[^" + plain_after_count + b"]")
+        alts.append(r + b".(?:" + b"|".join(after_count) + b")")
+    pattern = re.compile(b"(" + b"|".join(alts) + b")", re.DOTALL)
+    chars = bytes(c for c in (qctl, qbin, rept) if c is not None)
+    prefix = re.compile(b"[" + re.escape(chars) + b"]")
+    tokens = _TokenDict(rept)
+    enc = Encoding(qctl=qctl, qbin=qbin, rept=rept)
+    for c in range(256):
+        tokens[bytes((qctl, c))] = _reference_decode(enc, bytes((qctl, c)))
+        if qbin is not None:
+            tokens[bytes((qbin, qctl, c))] = _reference_decode(enc, bytes((qbin, qctl, c)))
+            if c != qctl:
+                tokens[bytes((qbin, c))] = _reference_decode(enc, bytes((qbin, c)))
+    return _SplitTable(pattern, prefix, tokens)
+
+
+# -- reference implementations (the definitions the tests hold the fast paths to) --
+
+
+def _reference_tokens(enc: Encoding, data: bytes) -> list[tuple[bytes, int]]:
+    """Tokenise ``data`` one byte at a time: ``(token, bytes it carries)`` pairs."""
+    specials = {c for c in (enc.qctl, enc.qbin, enc.rept) if c is not None}
+    out: list[tuple[bytes, int]] = []
+    i, n = 0, len(data)
+    while i < n:
+        b = data[i]
+        run = 1
+        while enc.rept is not None and i + run < n and data[i + run] == b and run < _MAX_RUN:
+            run += 1
+        token = _token(b, enc.qctl, enc.qbin, specials)
+        if run >= _MIN_RUN:
+            assert enc.rept is not None
+            out.append((bytes((enc.rept, run + 32)) + token, run))
+            i += run
+        else:
+            out.append((token, 1))
+            i += 1
+    return out
+
+
+def _reference_encode(enc: Encoding, data: bytes) -> bytes:
+    """Encode one byte (or one run) at a time (reference/kermit.md section 3)."""
+    return b"".join(token for token, _ in _reference_tokens(enc, data))
+
+
+def _reference_encode_prefix(enc: Encoding, data: bytes, capacity: int) -> tuple[bytes, int]:
+    """The longest run of whole tokens that fits in ``capacity``, and the bytes it carries."""
+    field = bytearray()
+    used = 0
+    for token, n in _reference_tokens(enc, data):
+        if len(field) + len(token) > capacity:
+            break
+        field += token
+        used += n
+    return bytes(field), used
+
+
+def _reference_decode(enc: Encoding, field: bytes) -> bytes:
+    """Decode one token at a time (gkermit.c decode order)."""
+    out = bytearray()
+    append = out.append
+    rept, qbin, qctl = enc.rept, enc.qbin, enc.qctl
+    i, n = 0, len(field)
+    while i < n:
+        c = field[i]
+        i += 1
+        if c != rept and c != qbin and c != qctl:
+            append(c)
+            continue
+        count = 1
+        if c == rept:
+            if i + 1 >= n:
+                raise _dangling()
+            count = field[i] - 32
+            if not 1 <= count <= _MAX_RUN:
+                raise _bad_count()
+            c = field[i + 1]
+            i += 2
+        high = 0
+        if c == qbin:
+            if i >= n:
+                raise _dangling()
+            high = 0x80
+            c = field[i]
+            i += 1
+        if c == qctl:
+            if i >= n:
+                raise _dangling()
+            c = field[i]
+            i += 1
+            if 63 <= (c & 0x7F) <= 95:
+                c ^= 64
+        if count == 1:
+            append(c | high)
+        else:
+            out += bytes((c | high,)) * count
+    return bytes(out)
 
 
 PRINTABLE = Encoding()

@@ -14,9 +14,11 @@ CHECK; see :data:`~serialsocket._wire.DEFAULT_MAX_PACKET_LENGTH`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-from ._checks import BlockCheck, check_chars
+from ._checks import BlockCheck, check_chars, crc16_kermit
 from ._errors import LocalProtocolError
 from ._wire import (
     CR,
@@ -34,6 +36,7 @@ from ._wire import (
 __all__ = ["Packet", "build_packet", "data_capacity", "packet_length"]
 
 _KNOWN_TYPES = {t.value: t for t in PacketType}
+_CHECK_LENGTH = {c: int(c) for c in BlockCheck}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -61,14 +64,43 @@ class Packet:
     def __post_init__(self) -> None:
         if not 0 <= self.seq < SEQ_MODULUS:
             raise LocalProtocolError(f"sequence number {self.seq} is outside 0..63")
-        if len(self.type) != 1 or not 33 <= ord(self.type) <= 126:
-            raise LocalProtocolError(f"packet type {self.type!r} is not one printable character")
-        if self.type in _KNOWN_TYPES and not isinstance(self.type, PacketType):
-            object.__setattr__(self, "type", _KNOWN_TYPES[self.type])
+        ptype = self.type
+        if ptype.__class__ is not PacketType:
+            if len(ptype) != 1 or not 33 <= ord(ptype) <= 126:
+                raise LocalProtocolError(f"packet type {ptype!r} is not one printable character")
+            if ptype in _KNOWN_TYPES:
+                _SET_TYPE(self, _KNOWN_TYPES[ptype])
         if MARK in self.data:
             raise LocalProtocolError(
                 "a data field must not contain the MARK (SOH): encode it first"
             )
+
+
+_new = object.__new__
+
+
+def _slot_setter(cls: type, name: str) -> Callable[[Any, Any], None]:
+    """The ``__set__`` of a slot: sets a field of a frozen, slotted dataclass
+    without the attribute lookup of ``object.__setattr__`` (hot paths only)."""
+    setter: Callable[[Any, Any], None] = getattr(cls, name).__set__
+    return setter
+
+
+_SET_SEQ = _slot_setter(Packet, "seq")
+_SET_TYPE = _slot_setter(Packet, "type")
+_SET_DATA = _slot_setter(Packet, "data")
+
+
+def _trusted_packet(seq: int, ptype: str, data: bytes) -> Packet:
+    """A :class:`Packet` from values already validated by the parser (seq in
+    0..63, ``ptype`` a printable letter or its :class:`PacketType`, no MARK in
+    ``data``), skipping ``__post_init__`` and the keyword ``__init__``: once
+    per packet on the receive path."""
+    packet = _new(Packet)
+    _SET_SEQ(packet, seq)
+    _SET_TYPE(packet, ptype)
+    _SET_DATA(packet, data)
+    return packet
 
 
 def packet_length(data_length: int, check: BlockCheck) -> int:
@@ -120,16 +152,31 @@ def build_packet(
             can carry (9024 data+check characters).
     """
     data = packet.data
-    field = len(data) + int(check)
+    k = _CHECK_LENGTH[check]
+    field = len(data) + k
     if field + 2 <= MAX_NORMAL_LEN:
-        head = bytes((field + 2 + 32, packet.seq + 32, ord(packet.type)))
+        covered = bytes((field + 34, packet.seq + 32, ord(packet.type))) + data
     elif field <= MAX_EXTENDED_FIELD:
-        hdr = bytes((32, packet.seq + 32, ord(packet.type), field // 95 + 32, field % 95 + 32))
-        head = hdr + check_chars(BlockCheck.SUM6, hdr)
+        seq_c, type_c, lenx1, lenx2 = (
+            packet.seq + 32,
+            ord(packet.type),
+            field // 95 + 32,
+            field % 95 + 32,
+        )
+        s = 32 + seq_c + type_c + lenx1 + lenx2
+        hcheck = ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32  # type 1 over LEN..LENX2
+        covered = bytes((32, seq_c, type_c, lenx1, lenx2, hcheck)) + data
     else:
         raise LocalProtocolError(
             f"data field of {len(data)} characters exceeds the Kermit maximum packet"
         )
-    covered = head + data
-    tail = b"" if eol is None else bytes((eol,))
-    return b"".join((padding, b"\x01", covered, check_chars(check, covered), tail))
+    if k == 3:
+        # CRC-16 inline (as check_chars computes it): the common case, once per packet.
+        crc = crc16_kermit(covered)
+        c1, c2, c3 = (crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32
+        tail = bytes((c1, c2, c3)) if eol is None else bytes((c1, c2, c3, eol))
+    else:
+        tail = check_chars(check, covered)
+        if eol is not None:
+            tail += bytes((eol,))
+    return b"".join((padding, b"\x01", covered, tail))

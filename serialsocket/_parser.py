@@ -30,9 +30,9 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ._checks import BlockCheck, check_chars
+from ._checks import BlockCheck, check_chars, crc16_kermit
 from ._errors import LocalProtocolError
-from ._packet import Packet
+from ._packet import Packet, _slot_setter, _trusted_packet
 from ._wire import (
     DEFAULT_MAX_PACKET_LENGTH,
     EXTENDED_HEADER_LENGTH,
@@ -42,6 +42,8 @@ from ._wire import (
     NORMAL_HEADER_LENGTH,
     PacketType,
 )
+
+_new = object.__new__
 
 __all__ = [
     "PacketParser",
@@ -59,6 +61,15 @@ _FILLER = b"\r\n\x00"
 """Bytes silently skipped between packets: EOL, LF that some hosts add, NUL padding."""
 
 _INIT_TYPES = frozenset({PacketType.SEND_INIT.value, PacketType.INIT.value})
+
+_SPECIAL_TYPES = frozenset(
+    ord(t) for t in (PacketType.SEND_INIT, PacketType.INIT, PacketType.NAK, PacketType.ERROR)
+)
+"""Type letters whose block check may differ from the one in force (``_checks_for``)."""
+
+_KNOWN = {ord(t.value): t for t in PacketType}
+_TYPES: tuple[str, ...] = tuple(_KNOWN.get(c, chr(c)) for c in range(256))
+"""The ``Packet.type`` of each type byte: the :class:`PacketType` member, or the letter."""
 
 
 class RejectReason(enum.StrEnum):
@@ -118,6 +129,24 @@ class PacketRejected:
 ParserEvent = PacketReceived | PacketRejected
 
 
+def _received(packet: Packet, extended: bool, check: BlockCheck, length: int) -> PacketReceived:
+    """``PacketReceived(...)`` for a packet the parser just verified, through
+    the slot descriptors (once per packet on the hot path; the keyword
+    ``__init__`` of a frozen dataclass costs twice as much)."""
+    event = _new(PacketReceived)
+    _SET_PACKET(event, packet)
+    _SET_EXTENDED(event, extended)
+    _SET_CHECK(event, check)
+    _SET_LENGTH(event, length)
+    return event
+
+
+_SET_PACKET = _slot_setter(PacketReceived, "packet")
+_SET_EXTENDED = _slot_setter(PacketReceived, "extended")
+_SET_CHECK = _slot_setter(PacketReceived, "check")
+_SET_LENGTH = _slot_setter(PacketReceived, "length")
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ParserStatistics:
     """Counters since the parser was created.
@@ -163,7 +192,11 @@ class PacketParser:
         self.max_length = max_length
         self.check = check
         self.init_check = init_check
-        self._buf = bytearray()
+        # The unparsed bytes are _buf[_pos:]: parsing moves _pos and slices
+        # packets straight out of an immutable buffer; receive_data drops the
+        # consumed prefix when it appends.
+        self._buf = b""
+        self._pos = 0
         self._discarding = False
         self._packets = 0
         self._rejected: dict[str, int] = {}
@@ -187,36 +220,108 @@ class PacketParser:
     @property
     def buffered(self) -> int:
         """Bytes held waiting for the rest of a packet."""
-        return len(self._buf)
+        return len(self._buf) - self._pos
 
     def receive_data(self, data: bytes | bytearray | memoryview) -> None:
         """Append bytes from the line.  Call :meth:`next_event` until it returns None."""
-        self._buf += data
+        if self._pos:
+            self._buf = self._buf[self._pos :] + data
+            self._pos = 0
+        else:
+            self._buf += data
 
     def next_event(self) -> ParserEvent | None:
         """The next packet or rejection, or None when more bytes are needed."""
         buf = self._buf
-        while buf:
-            if buf[0] != MARK:
+        n = len(buf)
+        pos = self._pos
+        if n - pos > 7 and self.check is BlockCheck.CRC16:
+            fast = self._next_fast(buf, n, pos)
+            if fast is not None:
+                return fast
+        while (pos := self._pos) < n:
+            if buf[pos] != MARK:
                 event = self._skip_to_mark()
                 if event is not None:
                     return event
                 continue
             self._discarding = False
-            if len(buf) < 2:
+            if n - pos < 2:
                 return None
-            total = self._frame_length()
-            if isinstance(total, PacketRejected):
-                return total
+            ln = buf[pos + 1]
+            if 35 <= ln <= 126:
+                total: int | None = ln - 30
+                if ln - 30 > self._max_length:
+                    return self._reject(RejectReason.TOO_LONG, 1)
+            else:
+                frame = self._extended_length()
+                if isinstance(frame, PacketRejected):
+                    return frame
+                total = frame
             # A MARK inside the frame (or inside what has arrived of it) means
             # this packet was cut short on the line.
-            cut = buf.find(MARK, 1, len(buf) if total is None else total)
+            stop = n if total is None else min(n, pos + total)
+            cut = buf.find(MARK, pos + 1, stop)
             if cut > 0:
-                return self._reject(RejectReason.TRUNCATED, cut)
-            if total is None or len(buf) < total:
+                return self._reject(RejectReason.TRUNCATED, cut - pos)
+            if total is None or n - pos < total:
                 return None
             return self._finish(total)
         return None
+
+    def _next_fast(self, buf: bytes, n: int, pos: int) -> PacketReceived | None:
+        """The common case in one straight run: [EOL] then a whole, valid packet
+        under CRC-16 whose type takes the check in force.  Anything else
+        (damage, a partial packet, S/I/N/E, other checks) returns None and
+        :meth:`next_event` takes its general path from where this left off.
+        """
+        if buf[pos] != MARK:
+            # The EOL after the previous packet, with a MARK right behind it.
+            if buf[pos] not in _FILLER or buf[pos + 1] != MARK:
+                return None
+            self._filler += 1
+            pos += 1
+            self._pos = pos
+        ln, seq_c, type_c = buf[pos + 1], buf[pos + 2], buf[pos + 3]
+        if 35 <= ln <= 126:
+            end = pos + ln - 30
+            start = pos + NORMAL_HEADER_LENGTH
+        elif ln == 32 and n - pos > EXTENDED_HEADER_LENGTH:
+            lenx1, lenx2 = buf[pos + 4], buf[pos + 5]
+            s = 32 + seq_c + type_c + lenx1 + lenx2
+            if not (32 <= lenx1 <= 126 and 32 <= lenx2 <= 126) or (
+                buf[pos + 6] != ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32
+            ):
+                return None
+            end = pos + EXTENDED_HEADER_LENGTH + (lenx1 - 32) * 95 + (lenx2 - 32)
+            start = pos + EXTENDED_HEADER_LENGTH
+        else:
+            return None
+        if (
+            end > n
+            or end - pos > self._max_length
+            or end - start < 3
+            or not (32 <= seq_c <= 95 and 33 <= type_c <= 126)
+            or type_c in _SPECIAL_TYPES
+            or buf.find(MARK, pos + 1, end) >= 0
+        ):
+            return None
+        crc = crc16_kermit(buf[pos + 1 : end - 3])
+        if (
+            buf[end - 3] != (crc >> 12) + 32
+            or buf[end - 2] != (crc >> 6 & 0x3F) + 32
+            or buf[end - 1] != (crc & 0x3F) + 32
+        ):
+            return None
+        self._pos = end
+        self._discarding = False
+        self._packets += 1
+        return _received(
+            _trusted_packet(seq_c - 32, _TYPES[type_c], buf[start : end - 3]),
+            ln == 32,
+            BlockCheck.CRC16,
+            end - pos,
+        )
 
     def statistics(self) -> ParserStatistics:
         """A snapshot of the counters."""
@@ -230,19 +335,24 @@ class PacketParser:
 
     def reset(self) -> None:
         """Drop any partial packet (e.g. when a connection is torn down)."""
-        self._buf.clear()
+        self._buf = b""
+        self._pos = 0
         self._discarding = False
 
     # -- internals ---------------------------------------------------------------
 
     def _skip_to_mark(self) -> PacketRejected | None:
-        buf = self._buf
-        i = buf.find(MARK)
+        buf, pos = self._buf, self._pos
+        i = buf.find(MARK, pos)
         end = len(buf) if i < 0 else i
-        chunk = bytes(buf[:end])
-        del buf[:end]
+        self._pos = end
+        if end - pos == 1 and buf[pos] in _FILLER:
+            # The EOL after each packet: the common case, kept cheap.
+            self._filler += 1
+            return None
+        chunk = buf[pos:end]
         noise = chunk.translate(None, _FILLER)
-        self._filler += end - len(noise)
+        self._filler += end - pos - len(noise)
         if not noise:
             return None
         self._garbage += len(noise)
@@ -252,50 +362,69 @@ class PacketParser:
         self._resyncs += 1
         return self._event(RejectReason.GARBAGE, chunk[:_SAMPLE], len(chunk))
 
-    def _frame_length(self) -> int | PacketRejected | None:
-        """Total length MARK..CHECK announced by the header, a rejection, or
-        None while an extended header is still incomplete."""
-        buf = self._buf
-        ln = buf[1]
-        if ln == 32:
-            if len(buf) < EXTENDED_HEADER_LENGTH:
-                return None
-            header = bytes(buf[1:6])
-            # LENX1/LENX2 must be tochar(0..94): a 6-bit HCHECK alone lets one
-            # damaged header in 64 through, and a control character there would
-            # give a negative length.
-            if not (32 <= buf[4] <= 126 and 32 <= buf[5] <= 126) or (
-                check_chars(BlockCheck.SUM6, header) != buf[6:7]
-            ):
-                return self._reject(RejectReason.BAD_HEADER, 1)
-            total = EXTENDED_HEADER_LENGTH + (buf[4] - 32) * 95 + (buf[5] - 32)
-        elif 35 <= ln <= 126:
-            total = 2 + ln - 32
-        else:
+    def _extended_length(self) -> int | PacketRejected | None:
+        """Total length MARK..CHECK announced by an extended header (or a bad
+        LEN), a rejection, or None while the extended header is incomplete."""
+        buf, pos = self._buf, self._pos
+        if buf[pos + 1] != 32:
             return self._reject(RejectReason.BAD_LENGTH, 1)
-        if total > self.max_length:
+        if len(buf) - pos < EXTENDED_HEADER_LENGTH:
+            return None
+        lenx1, lenx2 = buf[pos + 4], buf[pos + 5]
+        s = 32 + buf[pos + 2] + buf[pos + 3] + lenx1 + lenx2
+        # LENX1/LENX2 must be tochar(0..94): a 6-bit HCHECK alone lets one
+        # damaged header in 64 through, and a control character there would
+        # give a negative length.  HCHECK is type 1 over LEN..LENX2, inline.
+        if not (32 <= lenx1 <= 126 and 32 <= lenx2 <= 126) or (
+            buf[pos + 6] != ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32
+        ):
+            return self._reject(RejectReason.BAD_HEADER, 1)
+        total = EXTENDED_HEADER_LENGTH + (lenx1 - 32) * 95 + (lenx2 - 32)
+        if total > self._max_length:
             return self._reject(RejectReason.TOO_LONG, 1)
         return total
 
     def _finish(self, total: int) -> ParserEvent:
-        buf = self._buf
-        extended = buf[1] == 32
-        seq_c, type_c = buf[2], buf[3]
+        buf, pos = self._buf, self._pos
+        end = pos + total
+        extended = buf[pos + 1] == 32
+        seq_c, type_c = buf[pos + 2], buf[pos + 3]
         if not (32 <= seq_c <= 95 and 33 <= type_c <= 126):
             return self._reject(RejectReason.BAD_HEADER, total)
-        ptype = chr(type_c)
-        head = EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH
-        candidates = self._checks_for(ptype, total - head, extended)
+        ptype = _TYPES[type_c]
+        start = pos + (EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH)
+        check = self.check
+        if check is BlockCheck.CRC16 and type_c not in _SPECIAL_TYPES and end - start >= 3:
+            # The common case, inline: a data or ACK packet under CRC-16.
+            crc = crc16_kermit(buf[pos + 1 : end - 3])
+            if (
+                buf[end - 3] == (crc >> 12) + 32
+                and buf[end - 2] == (crc >> 6 & 0x3F) + 32
+                and buf[end - 1] == (crc & 0x3F) + 32
+            ):
+                self._pos = end
+                self._packets += 1
+                return _received(
+                    _trusted_packet(seq_c - 32, ptype, buf[start : end - 3]),
+                    extended,
+                    check,
+                    total,
+                )
+            return self._reject(RejectReason.BAD_CHECK, total)
+        candidates = self._checks_for(ptype, end - start, extended)
         if not candidates:
             return self._reject(RejectReason.BAD_LENGTH, total)
         for check in candidates:
-            n = int(check)
-            covered = bytes(buf[1 : total - n])
-            if check_chars(check, covered) == buf[total - n : total]:
-                packet = Packet(seq=seq_c - 32, type=ptype, data=covered[head - 1 :])
-                del buf[:total]
+            k = int(check)
+            if check_chars(check, buf[pos + 1 : end - k]) == buf[end - k : end]:
+                self._pos = end
                 self._packets += 1
-                return PacketReceived(packet=packet, extended=extended, check=check, length=total)
+                return _received(
+                    _trusted_packet(seq_c - 32, ptype, buf[start : end - k]),
+                    extended,
+                    check,
+                    total,
+                )
         return self._reject(RejectReason.BAD_CHECK, total)
 
     def _checks_for(self, ptype: str, field: int, extended: bool) -> list[BlockCheck]:
@@ -317,11 +446,12 @@ class PacketParser:
     def _reject(self, reason: RejectReason, upto: int) -> PacketRejected:
         # Every rejection consumes at least the MARK, so the parser always progresses.
         upto = max(upto, 1)
-        buf = self._buf
-        raw = bytes(buf[:upto])
-        seq = buf[2] - 32 if len(buf) > 2 and 32 <= buf[2] <= 95 else None
-        ptype = chr(buf[3]) if len(buf) > 3 and 33 <= buf[3] <= 126 else None
-        del buf[:upto]
+        buf, pos = self._buf, self._pos
+        raw = buf[pos : pos + upto]
+        avail = len(buf) - pos
+        seq = buf[pos + 2] - 32 if avail > 2 and 32 <= buf[pos + 2] <= 95 else None
+        ptype = chr(buf[pos + 3]) if avail > 3 and 33 <= buf[pos + 3] <= 126 else None
+        self._pos = pos + upto
         self._garbage += upto
         self._discarding = True
         self._resyncs += 1

@@ -1,0 +1,205 @@
+"""The fast codec paths against the plain reference definitions, for every profile.
+
+``serialsocket._encoding`` keeps the one-token-at-a-time definitions
+(``_reference_encode``, ``_reference_encode_prefix``, ``_reference_decode``);
+the vectorised encoder, the regular-expression decoder for short fields and
+the numpy decoder for long ones must agree with them byte for byte (and on
+which inputs are malformed).  Each decoder path is called directly, so both
+are covered whatever the length threshold between them.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
+
+from serialsocket import MalformedDataError
+from serialsocket._encoding import (
+    MAX_TOKEN_LENGTH,
+    _reference_decode,
+    _reference_encode,
+    _reference_encode_prefix,
+)
+from serialsocket.packets import (
+    EIGHT_BIT_CLEAN,
+    PRINTABLE,
+    BlockCheck,
+    Encoding,
+    Packet,
+    PacketParser,
+    ParserEvent,
+    ParserStatistics,
+    build_packet,
+)
+
+from .strategies import payloads
+
+ALL_PROFILES = [
+    Encoding(qctl=qctl, qbin=qbin, rept=rept)
+    for qctl, qbin, rept in itertools.product(
+        [ord("#"), ord("!"), ord("`")], [None, ord("&"), ord(">")], [None, ord("~"), ord("%")]
+    )
+]
+"""Every combination of the prefix options: QBIN on/off, REPT on/off, three QCTLs."""
+
+profiles = st.sampled_from(ALL_PROFILES)
+
+
+def long_payloads() -> st.SearchStrategy[bytes]:
+    """Payloads long enough for the vectorised paths, with runs sprinkled in."""
+    piece = st.one_of(
+        st.binary(min_size=1, max_size=400),
+        st.tuples(st.integers(0, 255), st.integers(1, 200)).map(lambda t: bytes([t[0]]) * t[1]),
+    )
+    return st.lists(piece, min_size=1, max_size=12).map(b"".join)
+
+
+def prefix_soup(enc: Encoding) -> st.SearchStrategy[bytes]:
+    """Arbitrary fields dense in this profile's prefix characters: every chain,
+    dangling ends and bad repeat counts included."""
+    chars = [c for c in (enc.qctl, enc.qbin, enc.rept) if c is not None]
+    alphabet = st.sampled_from([*chars, *chars, 0x20, 0x21, 0x3F, 0x40, 0x5F, 0x7E, 0xA3, 0xFF])
+    return st.lists(st.one_of(alphabet, st.integers(0, 255)), max_size=3000).map(bytes)
+
+
+def outcome(fn: object, *args: object) -> bytes | type[Exception]:
+    assert callable(fn)
+    try:
+        result = fn(*args)
+    except MalformedDataError:
+        return MalformedDataError
+    assert isinstance(result, bytes)
+    return result
+
+
+@given(enc=profiles, data=st.one_of(payloads, long_payloads()))
+@example(enc=PRINTABLE, data=bytes(range(256)) * 40)
+@example(enc=PRINTABLE, data=b"\x00" * 5000)
+@example(enc=EIGHT_BIT_CLEAN, data=b"ab" * 3000 + b"ccc")
+def test_encode_matches_reference(enc: Encoding, data: bytes) -> None:
+    wire = enc.encode(data)
+    assert wire == _reference_encode(enc, data)
+    assert enc._decode_split(wire) == data
+    if wire:
+        assert enc._decode_vector(wire) == data
+    assert enc.decode(wire) == data
+
+
+@given(enc=profiles, data=st.data())
+def test_decoders_agree_with_reference_on_arbitrary_fields(
+    enc: Encoding, data: st.DataObject
+) -> None:
+    field = data.draw(prefix_soup(enc))
+    expected = outcome(_reference_decode, enc, field)
+    assert outcome(enc._decode_split, field) == expected
+    if field:
+        assert outcome(enc._decode_vector, field) == expected
+    assert outcome(enc.decode, field) == expected
+
+
+@given(enc=profiles, data=payloads, capacity=st.integers(MAX_TOKEN_LENGTH, 300))
+def test_encode_prefix_matches_reference(enc: Encoding, data: bytes, capacity: int) -> None:
+    assert enc.encode_prefix(data, capacity) == _reference_encode_prefix(enc, data, capacity)
+
+
+@given(
+    enc=profiles,
+    data=st.one_of(payloads, long_payloads()),
+    capacity=st.integers(MAX_TOKEN_LENGTH, 200),
+    count=st.integers(1, 40),
+)
+def test_encode_fields_matches_reference(
+    enc: Encoding, data: bytes, capacity: int, count: int
+) -> None:
+    expected = []
+    rest = data
+    while rest and len(expected) < count:
+        field, used = _reference_encode_prefix(enc, rest, capacity)
+        expected.append((field, used))
+        rest = rest[used:]
+    assert enc.encode_fields(data, capacity, count) == expected
+
+
+@pytest.mark.parametrize("enc", ALL_PROFILES, ids=repr)
+def test_every_byte_value_and_run_boundary(enc: Encoding) -> None:
+    # Each byte value alone, in runs of 1..3 and around the 94-byte repeat limit.
+    for n in (1, 2, 3, 4, 93, 94, 95, 96, 97, 188, 189):
+        data = b"".join(bytes([b]) * n + b"x" for b in range(256))
+        wire = enc.encode(data)
+        assert wire == _reference_encode(enc, data)
+        assert enc._decode_vector(wire) == data
+        assert enc._decode_split(wire) == data
+
+
+@pytest.mark.parametrize(
+    ("field", "expected"),
+    [
+        (b"~#&", MalformedDataError),  # dangling after a repeat count and QBIN
+        (b"~##", MalformedDataError),  # REPT count '#' then a lone QCTL
+        (b"&#", MalformedDataError),  # QBIN QCTL at the end
+        (b"x~", MalformedDataError),
+        (b"~\x1fA", MalformedDataError),  # count below 1
+        (b"~\x7fA", MalformedDataError),  # count above 94
+        (b"&&", b"\xa6"),  # QBIN then a literal QBIN (G-Kermit decode)
+        (b"~#~", b"~~~"),  # after a count, REPT is literal
+        (b"&~", b"\xfe"),
+        (b"~!#@", b"\x00"),  # a count of 1 is legal
+    ],
+)
+def test_corner_fields(field: bytes, expected: bytes | type[Exception]) -> None:
+    assert outcome(_reference_decode, PRINTABLE, field) == expected
+    assert outcome(PRINTABLE._decode_split, field) == expected
+    assert outcome(PRINTABLE._decode_vector, field) == expected
+    # The same corner embedded at the end of a long valid field.
+    long = PRINTABLE.encode(bytes(range(256)) * 12) + field
+    full = outcome(_reference_decode, PRINTABLE, long)
+    assert outcome(PRINTABLE.decode, long) == full
+    assert outcome(PRINTABLE._decode_split, long) == full
+
+
+packet_specs = st.lists(
+    st.one_of(
+        st.tuples(
+            st.integers(0, 63),
+            st.sampled_from(["D", "Y", "N", "S", "I", "E", "Z", "q"]),
+            st.binary(max_size=300).map(PRINTABLE.encode),
+            st.sampled_from(list(BlockCheck)),
+        ),
+        st.binary(max_size=12),  # line noise between packets
+    ),
+    max_size=20,
+)
+
+
+@given(specs=packet_specs, data=st.data())
+def test_parser_fast_path_gives_the_events_of_the_general_path(
+    specs: list[tuple[int, str, bytes, BlockCheck] | bytes], data: st.DataObject
+) -> None:
+    wire = bytearray()
+    for spec in specs:
+        if isinstance(spec, bytes):
+            wire += spec
+        else:
+            seq, ptype, field, check = spec
+            wire += build_packet(Packet(seq=seq, type=ptype, data=field), check)
+    if wire and data.draw(st.booleans()):
+        # One flipped bit somewhere: damage must be reported the same way too.
+        at = data.draw(st.integers(0, len(wire) - 1))
+        wire[at] ^= 1 << data.draw(st.integers(0, 7))
+    max_len = data.draw(st.sampled_from([96, 200, 400]))
+
+    def run(fast: bool) -> tuple[list[ParserEvent], ParserStatistics, int]:
+        parser = PacketParser(max_length=max_len)
+        if not fast:
+            parser._next_fast = lambda *args: None  # type: ignore[method-assign]
+        events = []
+        for chunk in (bytes(wire[i : i + 50]) for i in range(0, len(wire), 50)):
+            parser.receive_data(chunk)
+            while (ev := parser.next_event()) is not None:
+                events.append(ev)
+        return events, parser.statistics(), parser.buffered
+
+    assert run(fast=True) == run(fast=False)
