@@ -408,3 +408,15 @@ def test_tcpstream_public_names_are_pinned() -> None:
             assert getattr(module, name) is not None
     # Names that mean something else in serialsocket live only in the submodules.
     assert not {"State", "SessionState", "PacketRejected", "TRANSITIONS"} & set(dir(tcpstream))
+
+
+LINKSIM_SANS_IO = ["control/_vocabulary", "control/_command_line"]
+"""The console's command language and command stack: lines and ``now`` in, text,
+commands and waits out; linksim.control._interactive is their I/O (the model's
+previews run on a private virtual clock in _preview, not here)."""
+
+
+@pytest.mark.parametrize("module", LINKSIM_SANS_IO)
+def test_the_console_command_line_is_sans_io(module: str) -> None:
+    bad = imports_of(ROOT / "linksim" / f"{module}.py") & (FORBIDDEN_IN_CORE | {"readline"})
+    assert not bad, f"linksim/{module}.py imports {bad}"

@@ -21,7 +21,15 @@ import serialsocket
 from linksim._errors import ConfigError
 from linksim._plotting import PlotUnavailable
 from linksim.arm import WorldConfig
-from linksim.control import TaskFile, parse_log, plot_log, preview, resolve_task
+from linksim.control import (
+    TaskFile,
+    TerminalLines,
+    parse_log,
+    plot_log,
+    preview,
+    resolve_task,
+    script_lines,
+)
 from linksim.demo import ConsoleOptions, DemoOptions, print_report, run_console, run_control
 from linksim.link import DirectionConfig, LinkConfig, run_virtual
 
@@ -63,6 +71,14 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--observer", action="store_true", help="watch an arm (tcp); send nothing")
     _task_arguments(ap)
+    ap.add_argument(
+        "--interactive",
+        "-i",
+        action="store_true",
+        help="type your own commands at a prompt (move_joint 1 20deg, path ..., estop, status, "
+        "help; Tab completes): each is previewed on the local model, queued, sent, and its "
+        "outcome shown against the prediction; piped in, the lines are a script",
+    )
     ap.add_argument(
         "--require-preview",
         action="store_true",
@@ -134,10 +150,52 @@ def _refusal(task: TaskFile, world: WorldConfig) -> str | None:
     )
 
 
+_NOT_INTERACTIVE = (
+    ("observer", "--observer"),
+    ("force", "--force"),
+    ("require_preview", "--require-preview"),
+    ("preview_only", "--preview-only"),
+    ("log", "--log"),
+)
+
+
+def _check_interactive(args: argparse.Namespace) -> None:
+    """Options that would be ignored with ``--interactive`` are refused."""
+    if not args.interactive:
+        return
+    for dest, flag in _NOT_INTERACTIVE:
+        if getattr(args, dest):
+            raise ConfigError(f"{flag} is for a task run; not with --interactive")
+    if args.task != "rock":
+        raise ConfigError("--interactive takes the commands you type; not with --task")
+    if args.world == "-":
+        raise ConfigError("--interactive reads its command lines on stdin; not with --world -")
+
+
+MAX_SCRIPT = 1 << 20
+"""Bytes of command lines piped to ``--interactive``: read whole, like a task file."""
+
+
+def _lines(args: argparse.Namespace) -> tuple[TerminalLines | None, list[str] | None]:
+    """A terminal's line reader, or the lines piped in (read now, so a virtual run
+    is the same run every time)."""
+    if sys.stdin.isatty():
+        return TerminalLines(), None
+    text = sys.stdin.read(MAX_SCRIPT + 1)
+    if len(text) > MAX_SCRIPT:
+        raise ConfigError(f"more than {MAX_SCRIPT} bytes of command lines on stdin")
+    return None, text.splitlines()
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
 def console_main(args: argparse.Namespace) -> int:
     """``linksim console``."""
     try:
         _check_stdin(args)
+        _check_interactive(args)
         if args.force and args.require_preview:
             raise ConfigError("--force and --require-preview contradict each other")
         if args.observer and (args.force or args.task != "rock"):
@@ -172,6 +230,10 @@ def console_main(args: argparse.Namespace) -> int:
             live=False if args.plain else None,
             timeout=args.timeout,
         )
+        terminal, script = _lines(args) if args.interactive else (None, None)
+        rate = args.speedup
+        if terminal is not None and args.virtual and not rate:
+            rate = 1.0  # someone is typing: the virtual clock keeps the wall clock's pace
         options = ConsoleOptions(
             demo,
             observer=args.observer,
@@ -182,8 +244,10 @@ def console_main(args: argparse.Namespace) -> int:
             port=args.port,
             baud=args.baud,
             dial=args.dial,
-            rate=args.speedup,
+            rate=rate,
             task=task,
+            lines=terminal or (None if script is None else script_lines(script, echo=_say)),
+            say=terminal.say if terminal is not None else _say,
         )
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"linksim console: {exc}", file=sys.stderr)

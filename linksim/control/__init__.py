@@ -10,7 +10,9 @@
 * Your own commands: :func:`parse_command` reads the operator's command
   language (``move_joint 1 20deg``; :class:`CommandSyntaxError`),
   :func:`resolve_task` / :func:`load_task` a task file (:class:`TaskFile`,
-  :class:`TaskFileError`).
+  :class:`TaskFileError`).  The console's command line: :class:`CommandStack`
+  (sans-I/O: lines in, previews, sends and outcomes out) and
+  :func:`run_command_line` with :func:`script_lines` or :class:`TerminalLines`.
 * :class:`TelemetryLog` / :func:`read_log` write and read the JSON-lines log
   (:func:`parse_log` reads it from lines, stdin for one);
   :func:`plot_log` plots it (``linksim plot``).
@@ -18,8 +20,10 @@
 
 from __future__ import annotations
 
+from ._command_line import CommandStack
 from ._console import ConsoleSession, ConsoleSnapshot
 from ._control import CommandRecord, CommandState, TaskRun, feedback_record
+from ._interactive import LineSource, TerminalLines, run_command_line, script_lines
 from ._plot import plot_log
 from ._predict import Divergence, Predictor
 from ._preview import ModelState, PredictedOutcome, PreviewReport, preview
@@ -30,11 +34,13 @@ from ._vocabulary import CommandSyntaxError, format_command, parse_command
 
 __all__ = [
     "CommandRecord",
+    "CommandStack",
     "CommandState",
     "CommandSyntaxError",
     "ConsoleSession",
     "ConsoleSnapshot",
     "Divergence",
+    "LineSource",
     "ModelState",
     "PredictedOutcome",
     "Predictor",
@@ -44,6 +50,7 @@ __all__ = [
     "TaskFileError",
     "TaskRun",
     "TelemetryLog",
+    "TerminalLines",
     "feedback_record",
     "format_command",
     "load_task",
@@ -53,4 +60,6 @@ __all__ = [
     "preview",
     "read_log",
     "resolve_task",
+    "run_command_line",
+    "script_lines",
 ]

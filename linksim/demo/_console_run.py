@@ -5,12 +5,17 @@ console in one process on trio's virtual clock (instant, deterministic);
 ``--transport tcp|serial`` drives a running ``linksim arm-server``;
 ``--observer`` watches one (TCP) without commanding.  Before anything is
 sent the task is previewed on the local model; ``--require-preview``
-refuses to send a plan the model says the arm would refuse.
+refuses to send a plan the model says the arm would refuse.  With
+``ConsoleOptions.lines`` (``--interactive``) the operator types the commands
+instead: :func:`~linksim.control.run_command_line` previews, sends and
+reports each one.
 """
 
 from __future__ import annotations
 
 import random
+import sys
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TextIO
 
@@ -20,12 +25,15 @@ import trio.testing
 import serialsocket
 from linksim.arm import SimulatedArm, WorldConfig
 from linksim.control import (
+    CommandStack,
     CommandState,
     ConsoleSession,
+    LineSource,
     TaskFile,
     TaskRun,
     TelemetryLog,
     preview,
+    run_command_line,
 )
 from linksim.link import endpoint_config_for, rtt_hint_for, run_virtual
 from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream, connect_tcp
@@ -66,6 +74,10 @@ class ConsoleOptions:
     model's (``demo.world``), to show divergence; None = the same world."""
     task: TaskFile | None = None
     """The commands to drive (a task file); None = the rock task."""
+    lines: LineSource | None = None
+    """The operator's command lines (``--interactive``): typed commands instead of a task."""
+    say: Callable[[str], None] | None = None
+    """Where the command line's messages go (default: a line on ``out``)."""
 
     @property
     def task_name(self) -> str:
@@ -81,9 +93,13 @@ class ConsoleResult:
     session: ConsoleSession | None
     error: str | None = None
     link: dict[str, Any] = field(default_factory=dict)
+    command_line: dict[str, Any] | None = None
+    """``--interactive``: the command stack's summary (every line's command and outcome)."""
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"ok": self.ok, "seconds": round(self.seconds, 3)}
+        if self.command_line is not None:
+            out |= {k: v for k, v in self.command_line.items() if k not in ("ok", "seconds")}
         s = self.session
         if s is not None:
             p = s.predictor
@@ -100,6 +116,11 @@ class ConsoleResult:
         out["link"] = self.link
         out["error"] = self.error
         return out
+
+
+Probe = Callable[[], Mapping[str, Any]]
+Driver = Callable[[ArmClient], Awaitable[None]]
+"""What runs once the session is up: the task, the observer's watch, or the command line."""
 
 
 def _window_figures(sock: serialsocket.SerialSocket) -> dict[str, Any]:
@@ -184,10 +205,22 @@ async def _virtual(options: ConsoleOptions) -> ConsoleResult:
     title = f"telelink console: {options.task_name} over {demo.transport} ({where})"
     session, log = _session(options, title)
     error = _refused_by_preview(session, options)
+
+    def set_link(probe: Probe) -> None:
+        session.link = probe
+
     try:
         with session:
             if error is None:
-                error = await _virtual_session(options, arm, rng, server_cfg, session, figures)
+                error = await _virtual_session(
+                    options,
+                    arm,
+                    rng,
+                    server_cfg,
+                    figures,
+                    lambda client: _drive(client, session, options),
+                    set_link,
+                )
     finally:
         if log is not None:
             log.close()
@@ -199,12 +232,15 @@ async def _virtual_session(
     arm: SimulatedArm,
     rng: random.Random,
     server_cfg: ServerConfig,
-    session: ConsoleSession,
     figures: dict[str, Any],
+    drive: Driver,
+    set_link: Callable[[Probe], None],
+    *,
+    bounded: bool = True,
 ) -> str | None:
     demo = options.demo
     error: str | None = None
-    with trio.move_on_after(demo.timeout) as scope:
+    with trio.move_on_after(demo.timeout if bounded else float("inf")) as scope:
         async with (
             virtual_streams(demo) as (ctl, arm_side, probe),
             Server(arm, server_cfg) as server,
@@ -213,9 +249,9 @@ async def _virtual_session(
             nursery.start_soon(server.serve_stream, arm_side)
             if isinstance(ctl, serialsocket.SerialSocket):
                 sock = ctl
-                session.link = lambda: _window_figures(sock)
+                set_link(lambda: _window_figures(sock))
             else:
-                session.link = probe
+                set_link(probe)
             try:
                 async with connect_stream(
                     ctl,
@@ -224,7 +260,7 @@ async def _virtual_session(
                     incarnation=rng.getrandbits(64),
                     nonce_source=rng.randbytes,
                 ) as client:
-                    await _drive(client, session, options)
+                    await drive(client)
                     # The line's own figures (serial: what crossed the wire) win.
                     figures.update(client_link_figures(client) | probe())
             except (SessionError, trio.BrokenResourceError, OSError) as exc:
@@ -243,12 +279,21 @@ async def _real(options: ConsoleOptions) -> ConsoleResult:
     title = f"telelink console: {role} over {demo.transport}"
     session, log = _session(options, title)
     error = _refused_by_preview(session, options)
+
+    def set_link(probe: Probe) -> None:
+        session.link = probe
+
     try:
         with session:
             if error is None:
                 try:
                     with trio.fail_after(demo.timeout):
-                        await _real_session(options, session, figures)
+                        await _real_session(
+                            options,
+                            figures,
+                            lambda client: _drive(client, session, options),
+                            set_link,
+                        )
                 except trio.TooSlowError:
                     if not options.observer:
                         error = f"the run did not finish within {demo.timeout:g} s"
@@ -266,7 +311,10 @@ async def _real(options: ConsoleOptions) -> ConsoleResult:
 
 
 async def _real_session(
-    options: ConsoleOptions, session: ConsoleSession, figures: dict[str, Any]
+    options: ConsoleOptions,
+    figures: dict[str, Any],
+    drive: Driver,
+    set_link: Callable[[Probe], None],
 ) -> None:
     demo = options.demo
     if demo.transport == "tcp":
@@ -277,8 +325,8 @@ async def _real_session(
             key=demo.key,
             observer=options.observer,
         ) as client:
-            session.link = lambda: _session_figures(client)
-            await _drive(client, session, options)
+            set_link(lambda: _session_figures(client))
+            await drive(client)
             figures.update(_session_figures(client))
         return
     if options.port is None:
@@ -292,8 +340,8 @@ async def _real_session(
         async with connect_stream(
             sock, identity=IDENTITY, key=demo.key, observer=options.observer
         ) as client:
-            session.link = lambda: _window_figures(sock)
-            await _drive(client, session, options)
+            set_link(lambda: _window_figures(sock))
+            await drive(client)
             figures.update(client_link_figures(client) | _window_figures(sock))
     finally:
         await sock.aclose()
@@ -311,8 +359,66 @@ def _result(
     return ConsoleResult(ok, seconds, session, error, figures)
 
 
+async def _command_line(options: ConsoleOptions) -> ConsoleResult:
+    """``--interactive``: the operator's lines through the command stack, until they end.
+
+    The session as a whole is not bounded (the operator ends it); each wait
+    for the arm is (``timeout``)."""
+    demo = options.demo
+    start = trio.current_time()
+    stack = CommandStack(demo.world, origin=start)
+    out = options.out if options.out is not None else sys.stderr
+
+    def say(text: str) -> None:
+        print(text, file=out, flush=True)
+
+    assert options.lines is not None
+    lines = options.lines
+    show = options.say or say
+    figures: dict[str, Any] = {}
+    where = f"{demo.preset or 'custom link'}, virtual time" if demo.virtual else "real time"
+    show(
+        f"telelink console: command line over {demo.transport} ({where}); "
+        "help lists the commands, Tab completes, quit ends"
+    )
+
+    async def drive(client: ArmClient) -> None:
+        await run_command_line(client, stack, lines, show, timeout=demo.timeout)
+
+    def set_link(probe: Probe) -> None:
+        stack.link = probe
+
+    error: str | None = None
+    if demo.virtual:
+        arm = SimulatedArm(options.arm_world or demo.world)
+        rng = random.Random(demo.link.seed)
+        server_cfg = ServerConfig(
+            key=demo.key, rtt_hint=rtt_hint_for(demo.link), nonce_source=rng.randbytes
+        )
+        error = await _virtual_session(
+            options, arm, rng, server_cfg, figures, drive, set_link, bounded=False
+        )
+    else:
+        try:
+            await _real_session(options, figures, drive, set_link)
+        except (SessionError, serialsocket.DialError, trio.BrokenResourceError, OSError) as exc:
+            error = explain_failure(exc)
+    now = trio.current_time()
+    summary = stack.summary(now)
+    ok = error is None and stack.ok
+    return ConsoleResult(ok, now - start, None, error, figures, summary)
+
+
 def run_console(options: ConsoleOptions) -> ConsoleResult:
     """Run the console to the end (never raises for a failed run)."""
+    if options.lines is not None:
+        if not options.demo.virtual:
+            return trio.run(_command_line, options)
+        if options.rate > 0:
+            clock = trio.testing.MockClock(rate=options.rate)
+        else:
+            clock = trio.testing.MockClock(autojump_threshold=0)
+        return run_virtual(_command_line, options, clock=clock)
     if options.demo.virtual:
         if options.rate > 0:
             clock = trio.testing.MockClock(rate=options.rate)
