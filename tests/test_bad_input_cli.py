@@ -547,6 +547,12 @@ RUNTIME_CASES = [
     (["linksim", "demo", "--transport", "tcp", "--dial", "5551234"], 2, "serial transport", False),
     (["linksim", "demo", "--transport", "tcp", "--window", "4"], 2, "tcp transport has", False),
     (["linksim", "demo", "--transport", "tcp", "--max-len", "90"], 2, "tcp transport has", False),
+    (
+        ["linksim", "bench", "latency", "--client", "asyncio", "--server", "loop"],
+        2,
+        "--server loop needs the trio client",
+        False,
+    ),
     (["linksim", "relay", "--device", "/dev/null"], 1, "give exactly two devices", False),
     (
         ["linksim", "relay", "--device", "loop://", "--device", "/dev/ptmx"],

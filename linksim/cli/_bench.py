@@ -343,14 +343,43 @@ def add_latency_arguments(ap: argparse.ArgumentParser) -> None:
         default="both",
         help="loopback TCP, a serial socket on a raw pty, or both (default)",
     )
+    ap.add_argument(
+        "--client",
+        choices=["trio", "asyncio"],
+        default="trio",
+        help="the controller side: the trio client (default) or the asyncio one "
+        "(tcpstream.asyncio over TCP, or over serialsocket.asyncio on the pty)",
+    )
+    ap.add_argument(
+        "--server",
+        choices=["loop", "process"],
+        default=None,
+        help="where the trio arm and echo servers run: in the trio client's own loop "
+        "(its default), or in a process of their own (the asyncio client's default and "
+        "only choice; give it to the trio client too to compare the two like for like)",
+    )
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
 
 def latency_main(args: argparse.Namespace) -> int:
     """Run the benchmark and print the report (text, or JSON with ``--json``)."""
+    if args.client == "asyncio" and args.server == "loop":
+        print(
+            "linksim bench latency: --server loop needs the trio client "
+            "(the servers are trio); the asyncio client uses --server process",
+            file=sys.stderr,
+        )
+        return 2
     transports = list(LATENCY_TRANSPORTS) if args.transport == "both" else [args.transport]
     reports = [
-        run_latency(args.count, args.warmup, authenticated=args.key, transport=t)
+        run_latency(
+            args.count,
+            args.warmup,
+            authenticated=args.key,
+            transport=t,
+            client=args.client,
+            server=args.server,
+        )
         for t in transports
     ]
     if args.json:
@@ -362,10 +391,12 @@ def latency_main(args: argparse.Namespace) -> int:
         cmd, raw = report["command"], report["raw_echo"]
         auth = "with HMAC tags" if report["authenticated"] else "no key"
         where = "loopback TCP" if report["transport"] == "tcp" else "a serial socket on a raw pty"
+        server = "the client's own loop" if report["server"] == "loop" else "a process of their own"
         print(
             f"command -> completed over {where} ({report['count']} round trips, "
             f"216-byte packets, {auth})"
         )
+        print(f"  client: {report['client']}; arm and echo servers (trio) in {server}")
         name = "TCP" if report["transport"] == "tcp" else "pty"
         print(f"  tcpstream STATUS : p50 {cmd['p50_us']:8.1f} us   p99 {cmd['p99_us']:8.1f} us")
         print(f"  raw {name} echo     : p50 {raw['p50_us']:8.1f} us   p99 {raw['p99_us']:8.1f} us")
