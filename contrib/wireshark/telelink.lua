@@ -6,7 +6,9 @@
 --     framing (MARK LEN SEQ TYPE DATA CHECK, normal and extended "long"
 --     packets, block check types 1, 2 and 3 = CRC-16/KERMIT), the serial
 --     socket's ARQ packet types (serialsocket/PROTOCOL.md) and Kermit file
---     transfer types (serialsocket/KERMIT.md).
+--     transfer types (serialsocket/KERMIT.md).  The ARQ's data is put back
+--     in sequence each way; a stream that is a tcpstream session (the arm
+--     server over a serial line) has its command packets dissected too.
 --   * "tlcmd": tcpstream's 216-byte packets (tcpstream/PROTOCOL.md): on
 --     LINKTYPE_USER1 (148; `linksim arm-server --transport tcp --capture`) and
 --     on TCP port 7010 (a plain tcpdump/Wireshark capture of the arm server).
@@ -259,6 +261,53 @@ end
 
 local dissect_cmd_tvb -- defined with tlcmd below
 
+----------------------------------------------------------------------------
+-- The serial socket's byte stream, each way: good D packets put back in
+-- sequence order, duplicates dropped (serialsocket/PROTOCOL.md section 4).
+-- When a stream starts with a tcpstream HELLO ("TL" 1), its 216-byte packets
+-- are dissected in the frame whose data completed them.  Built on the first
+-- pass, in frame order; later passes show what was stored per frame.
+----------------------------------------------------------------------------
+local arq = { streams = {}, frames = {} }
+local ARQ_AHEAD = 32 -- sequence numbers at or after `expected` that are new (window <= 31)
+
+function arq.reset()
+    arq.streams, arq.frames = {}, {}
+end
+
+-- An init starts new sequence spaces (data from 1) both ways on that interface.
+function arq.restart(interface)
+    arq.streams["serial line:" .. interface .. ":1"] = nil -- the keys of stream_carry
+    arq.streams["serial line:" .. interface .. ":2"] = nil
+end
+
+function arq.data(key, seq, data, frame)
+    local s = arq.streams[key]
+    if s == nil then
+        s = { expected = 1, held = {}, buffer = "", mode = nil }
+        arq.streams[key] = s
+    end
+    if (seq - s.expected) % 64 >= ARQ_AHEAD or s.held[seq] ~= nil then return end
+    s.held[seq] = data
+    while s.held[s.expected] ~= nil do
+        s.buffer = s.buffer .. s.held[s.expected]
+        s.held[s.expected] = nil
+        s.expected = (s.expected + 1) % 64
+    end
+    if s.mode == nil and #s.buffer >= 3 then
+        s.mode = s.buffer:sub(1, 3) == "TL\1" and "tcpstream" or "bytes"
+    end
+    if s.mode == "tcpstream" then
+        while #s.buffer >= CMD_SIZE do
+            arq.frames[frame] = arq.frames[frame] or {}
+            table.insert(arq.frames[frame], s.buffer:sub(1, CMD_SIZE))
+            s.buffer = s.buffer:sub(CMD_SIZE + 1)
+        end
+    elseif s.mode == "bytes" then
+        s.buffer = "" -- not a command session: nothing more to decode
+    end
+end
+
 local function add_init(tree, buf, dstart, dlen, bytes)
     local t = tree:add(f.init, buf:range(dstart, dlen))
     local fields = { f.init_maxl, f.init_time, f.init_npad, false, f.init_eol, f.init_qctl,
@@ -380,11 +429,8 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
             else
                 t:add(f.decoded_text, buf:range(dstart, dlen), printable(decoded:sub(1, 80)))
                 words = words .. " " .. #decoded .. "B"
-                -- Best effort: a data field that is whole tcpstream packets.
-                if #decoded % CMD_SIZE == 0 and decoded:sub(1, 3) == "TL\1" then
-                    for off = 0, #decoded - CMD_SIZE, CMD_SIZE do
-                        dissect_cmd_tvb(dtvb:range(off, CMD_SIZE):tvb(), pinfo, t)
-                    end
+                if type_char == "D" and good and not pinfo.visited then
+                    arq.data(serial_carry.key(), seq, decoded, pinfo.number)
                 end
             end
         end
@@ -396,6 +442,10 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
     if not good then
         ci:add_proto_expert_info(ef_bad_check)
         words = words .. " [BAD CHECK]"
+    end
+    if type_char == "I" and good and not pinfo.visited then
+        local i = frame_interface()
+        arq.restart(tostring(i and i.value or 0))
     end
     if has_eol then t:add(f.eol, buf:range(pos + total, 1)) end
     t:set_text(string.format("Kermit %s seq=%d len=%d: %s", type_char, seq, total, name))
@@ -476,6 +526,10 @@ function tl.dissector(tvb, pinfo, tree)
     end
     flush_noise(math.min(pos, keep_from))
     serial_carry.keep(buf, keep_from, pinfo)
+    for _, raw in ipairs(arq.frames[pinfo.number] or {}) do
+        local packet = ByteArray.new(raw, true):tvb("tcpstream packet (serial socket data)")
+        table.insert(summary, dissect_cmd_tvb(packet, pinfo, tree))
+    end
     if keep_from < n then table.insert(summary, "(" .. (n - keep_from) .. "B carried)") end
     local arrow = direction_prefix()
     if #summary == 0 then summary = { "EOL" } end
@@ -647,6 +701,7 @@ end
 
 function tl.init()
     serial_carry.reset()
+    arq.reset()
     stream_carry_cmd.reset()
 end
 
