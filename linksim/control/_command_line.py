@@ -420,8 +420,14 @@ class CommandStack:
         return f"DIVERGES from the model: {what} ({size}); the model now follows the arm"
 
     def telemetry(self, feedback: Feedback, now: float) -> list[Output]:
-        """A telemetry sample: compared with the predicted path (``status`` shows the counts)."""
-        self.predictor.observe(feedback, now)
+        """A telemetry sample: compared with the predicted path while commands are
+        pending (``status`` shows the counts); while none is, the model stands where
+        the arm says it is, so the next preview starts from the real arm (one that a
+        previous session left elsewhere, or moved by hand)."""
+        if self.idle:
+            self.predictor.reset(feedback, now)
+        else:
+            self.predictor.observe(feedback, now)
         return []
 
     def stopped(

@@ -7,6 +7,7 @@ import io
 import json
 import math
 import os
+import pty
 import select
 import sys
 import time
@@ -337,10 +338,7 @@ def _read_until(fd: int, words: str) -> str:
     return seen
 
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs a pty")
 def test_at_a_terminal_tab_completes_and_ctrl_c_exits_130() -> None:
-    import pty
-
     argv = [sys.executable, "-m", "linksim", "console", "--virtual", "--preset", "clean", "-i"]
     pid, fd = pty.fork()
     if pid == 0:  # pragma: no cover -- the child
@@ -371,3 +369,22 @@ def test_a_session_the_arm_ended_is_one_line_not_a_traceback(
         "-- the session's failure, not the arm's: nothing to compare with the model"
     )
     assert lines[-1].startswith("linksim console: the session is closed; nothing was sent")
+
+
+def test_while_idle_the_model_stands_where_the_telemetry_says() -> None:
+    stack = CommandStack()
+    elsewhere = dataclasses.replace(
+        _after([]), joints=(*DEFAULT_WORLD.initial_joints[:5], 250 * DEG)
+    )
+    assert stack.telemetry(elsewhere, 0.0) == []
+    # From 250 deg, 20 more is past joint 6's 266 deg limit.
+    assert "joint 6 would be at 270.0 deg" in _texts(stack.feed("move_joint 6 20deg", 0.0))[0]
+    # A pose the model cannot stand in: it says so, and force sends unpreviewed.
+    stack.telemetry(dataclasses.replace(elsewhere, joints=(150 * DEG, *elsewhere.joints[1:])), 1.0)
+    assert _texts(stack.feed("move_joint 1 -20deg", 1.0)) == [
+        "#2 move joint 1 by -20.0 deg -- model: cannot predict (initial_joints: link 3 is inside "
+        "obstacle 'rack'); not sent ('force move_joint 1 -20deg' sends it anyway)"
+    ]
+    forced = stack.feed("force move_joint 1 -20deg", 1.0)
+    assert isinstance(forced[-1], Submit)
+    assert stack.entry(3).prediction == "-"

@@ -9,6 +9,7 @@ import pathlib
 import pytest
 
 from linksim import DEFAULT_WORLD, rock_task
+from linksim.cli import _console as console_cli
 from linksim.cli import main
 from linksim.control import (
     CommandSyntaxError,
@@ -378,3 +379,26 @@ def test_a_bad_entry_in_a_task_file_is_one_line_naming_it(
         f"linksim control: {path} line 3, entry 2: move_joint: by (angle): '20' needs a unit "
         "(deg, °, rad), for example 20deg\n"
     )
+
+
+REFUSED_EXAMPLES = {"reach_too_far.json"}
+"""Example task files written to show the preview's refusal."""
+
+
+@pytest.mark.parametrize("path", sorted(TASKS.iterdir()), ids=lambda p: p.name)
+def test_every_example_task_file_parses_and_previews_as_it_says(path: pathlib.Path) -> None:
+    task = load_task(path)
+    assert task.description, f"{path.name} says what it does"
+    report = preview(task.commands, DEFAULT_WORLD)
+    assert report.ok is (path.name not in REFUSED_EXAMPLES)
+
+
+def test_ctrl_c_during_control_is_one_line_and_130(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(console_cli, "run_virtual", interrupted)
+    assert main(["control", "--virtual", "--task", str(TASKS / "wave.toml")]) == 130
+    assert capsys.readouterr().err == "linksim control: interrupted\n"
