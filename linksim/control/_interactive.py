@@ -82,6 +82,10 @@ class TerminalLines:
         self._prompt = prompt
         self._out = out if out is not None else sys.stderr
         self._reading = False
+        # input() edits the line with readline, prompt on stdout, only when stdout
+        # is the terminal too; with stdout redirected (--json > FILE) the prompt
+        # goes to stderr, the results stay clean, and the line is read plainly.
+        self._editing = sys.stdout.isatty()
         readline.set_completer_delims(" \t")
         readline.set_completer(self._complete)
         readline.parse_and_bind("tab: complete")
@@ -102,14 +106,18 @@ class TerminalLines:
             self._reading = False
 
     def _read(self) -> str:
-        return input(self._prompt)
+        if self._editing:
+            return input(self._prompt)
+        print(self._prompt, end="", file=self._out, flush=True)
+        return input()
 
     def say(self, text: str) -> None:
         if self._reading:
             # Over the prompt, then the prompt and what was typed so far again.
             print("\r\x1b[K" + text, file=self._out, flush=True)
-            sys.stdout.write(self._prompt + readline.get_line_buffer())
-            sys.stdout.flush()
+            prompt = sys.stdout if self._editing else self._out
+            prompt.write(self._prompt + readline.get_line_buffer())
+            prompt.flush()
         else:
             print(text, file=self._out, flush=True)
 
