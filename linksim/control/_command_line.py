@@ -62,6 +62,18 @@ __all__ = [
 CONSOLE_WORDS = ("force", "help", "history", "queue", "quit", "exit", "status", "wait")
 """Words the console handles itself (``estop`` is in the language, sent at once)."""
 
+CONSOLE_HELP = {
+    "force": "force COMMAND ARGS...: send a command the model says the arm would refuse",
+    "help": "help [COMMAND]: the commands, or one command's arguments and an example",
+    "history": "the lines typed so far, numbered (the arrow keys recall them)",
+    "queue": "the commands sent and not yet answered, with the model's verdict on each",
+    "quit": "wait for the commands pending (at most --timeout), then end the session",
+    "exit": "as quit",
+    "status": "the console's view: confirmed and predicted state, the commands, the link",
+    "wait": "take no more lines until every command sent is answered (at most --timeout)",
+}
+"""``help WORD`` for the console's own words."""
+
 MAX_HISTORY = 1000
 """Lines kept for ``history`` (readline keeps its own for the arrow keys)."""
 
@@ -253,8 +265,8 @@ class CommandStack:
         if not text:
             return []
         self.history.append(text)
-        word, _, rest = text.partition(" ")
-        rest = rest.strip()
+        word, *more = text.split(None, 1)
+        rest = more[0].strip() if more else ""
         if word in ("quit", "exit"):
             return [Quit()]
         if word == "help":
@@ -491,6 +503,8 @@ class CommandStack:
         return "\n".join(lines)
 
     def _help(self, topic: str) -> str:
+        if topic in CONSOLE_HELP:
+            return f"{topic}: {CONSOLE_HELP[topic]}"
         if topic:
             try:
                 verb = verb_of(topic)

@@ -117,7 +117,7 @@ def test_a_command_the_model_refuses_is_not_sent_unless_forced() -> None:
     assert stack.entry(1).state is EntryState.REFUSED
     assert stack.rejected == 1
     assert not stack.ok
-    forced = stack.feed("force move_joint 1 200deg", 0.0)
+    forced = stack.feed("force\tmove_joint 1 200deg", 0.0)
     assert isinstance(forced[1], Submit)
     assert _texts(forced)[0].endswith("; queued (forced)")
     stack.sent(2, 0.0)
@@ -193,6 +193,9 @@ def test_console_words() -> None:
         "  seed 004's incremental move: the hand by dP, turned by rot about the base axes\n"
         "  arguments: dp: 3 numbers in m|cm|mm; rot: 3 numbers in deg|°|rad\n"
         "  example: move_by 0,0,-120mm"
+    ]
+    assert _texts(stack.feed("help   status", 0.0)) == [
+        "status: the console's view: confirmed and predicted state, the commands, the link"
     ]
     overview = _texts(stack.feed("help", 0.0))[0]
     assert "  move_joint      move_joint 1 20deg" in overview
