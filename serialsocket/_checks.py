@@ -9,16 +9,32 @@ value 0x2189 for "123456789").  It is computed by crcmod's predefined
 ``kermit`` function (a C extension), *not* :func:`binascii.crc_hqx`, which is
 CRC-16/XMODEM.  The 16-bit value is sent high to low as 4+6+6 bits through
 ``tochar``, not byte-swapped.
+
+CRC-32 (:func:`crc32_ieee`, :func:`crc32_chars`) is the stronger check offered
+for long packets on clean lines (issue 21; serialsocket/DENSE.md): the
+ZMODEM / IEEE 802.3 CRC (poly 0x04C11DB7 reflected, init and final XOR
+0xFFFFFFFF; check value 0xCBF43926 for "123456789"), computed by
+:func:`zlib.crc32`.  It is not a Kermit block-check type and is not negotiated
+yet, so it has no :class:`BlockCheck` member.
 """
 
 from __future__ import annotations
 
 import enum
+import zlib
 from collections.abc import Callable
 
 import crcmod.predefined
 
-__all__ = ["BlockCheck", "check_chars", "check_length", "crc16_kermit"]
+__all__ = [
+    "CRC32_LENGTH",
+    "BlockCheck",
+    "check_chars",
+    "check_length",
+    "crc16_kermit",
+    "crc32_chars",
+    "crc32_ieee",
+]
 
 crc16_kermit: Callable[[bytes], int] = crcmod.predefined.mkCrcFun("kermit")
 """CRC-16/KERMIT of a byte string (crcmod's C implementation when available)."""
@@ -60,3 +76,27 @@ def check_chars(check: BlockCheck, covered: bytes) -> bytes:
         return bytes((((s + ((s & 0xC0) >> 6)) & 0x3F) + 32,))
     s &= 0xFFF
     return bytes(((s >> 6 & 0x3F) + 32, (s & 0x3F) + 32))
+
+
+CRC32_LENGTH = 6
+"""Characters of a CRC-32 check: 2 + 5 x 6 bits."""
+
+
+def crc32_ieee(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
+    """CRC-32/ISO-HDLC (ZMODEM's 32-bit CRC, IEEE 802.3): check("123456789") = 0xCBF43926.
+
+    Args:
+        data: the bytes.
+        crc: a previous result, to continue over a following piece.
+    """
+    return zlib.crc32(data, crc)
+
+
+def crc32_chars(covered: bytes | bytearray | memoryview) -> bytes:
+    """The CRC-32 of ``covered`` as six printable characters, high to low.
+
+    The 32-bit value is cut like type 3's 16 (4+6+6): 2 bits, then five
+    groups of 6, each through ``tochar`` -- every character in 32..95.
+    """
+    crc = zlib.crc32(covered)
+    return bytes(((crc >> shift) & 0x3F) + 32 for shift in (30, 24, 18, 12, 6, 0))
