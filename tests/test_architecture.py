@@ -17,6 +17,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 SANS_IO = [
     "_checks",
     "_config",
+    "_dense",
     "_diagram",
     "_encoding",
     "_endpoint",
