@@ -196,7 +196,7 @@ def complete_line(text: str) -> list[str]:
         return complete(text.split(None, 1)[1] if len(words) > 1 else "")
     if words and words[0] == "help" and (len(words) > 1 or text.endswith(" ")):
         partial = words[1] if len(words) > 1 else ""
-        return sorted(n for n in VERBS if n.startswith(partial))
+        return sorted(n for n in (*VERBS, *CONSOLE_HELP) if n.startswith(partial))
     return complete(text, CONSOLE_WORDS)
 
 

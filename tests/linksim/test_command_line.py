@@ -222,6 +222,7 @@ def test_completion() -> None:
     assert complete_line("force mo") == ["move_by", "move_joint", "move_joints", "move_to"]
     assert "status" not in complete_line("force ")
     assert complete_line("help sq") == ["squeeze"]
+    assert complete_line("help st") == ["status"]
     assert complete_line("path 1,2,3mm b") == ["blend="]
     assert complete_line("open_fingers 60") == [
         "60%",

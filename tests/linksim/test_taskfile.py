@@ -402,3 +402,11 @@ def test_ctrl_c_during_control_is_one_line_and_130(
     monkeypatch.setattr(console_cli, "run_virtual", interrupted)
     assert main(["control", "--virtual", "--task", str(TASKS / "wave.toml")]) == 130
     assert capsys.readouterr().err == "linksim control: interrupted\n"
+
+
+def test_the_rock_task_file_is_the_builtin_rock_task() -> None:
+    task = load_task(TASKS / "rock.toml")
+    builtin = rock_task(DEFAULT_WORLD).commands
+    assert [c.code for c in task.commands] == [c.code for c in builtin]
+    for mine, theirs in zip(task.commands, builtin, strict=True):
+        assert mine.args == pytest.approx(theirs.args, abs=1e-12)
