@@ -306,6 +306,7 @@ def control_main(args: argparse.Namespace) -> int:
             raise ConfigError("--port and --dial reach a real arm server; not with --virtual")
         if args.virtual and (args.host != "127.0.0.1" or args.tcp_port != 7010):
             raise ConfigError("--host and --tcp-port reach a real arm server; not with --virtual")
+        _demo.refuse_ignored_options(args)  # --dial or --window where they cannot act
         if not args.virtual and args.transport == "serial" and not args.port:
             raise ConfigError("--port PATH is needed for the serial transport (or use --virtual)")
         _check_stdin(args)

@@ -351,6 +351,8 @@ def test_console_refuses_a_refused_task_file_before_sending(
         (["control", "--virtual", "--port", "/dev/null"], "not with --virtual"),
         (["control", "--virtual", "--tcp-port", "7011"], "not with --virtual"),
         (["control"], "--port PATH is needed for the serial transport"),
+        (["control", "--virtual", "--transport", "tcp", "--window", "4"], "tcp transport has"),
+        (["control", "--transport", "tcp", "--dial", "555"], "needs the serial transport"),
         (["console", "--preview-only", "--task", "-", "--world", "-"], "cannot both read stdin"),
         (["console", "--virtual", "--force", "--require-preview"], "contradict"),
         (["console", "--observer", "--task", "x.toml"], "--observer sends nothing"),
