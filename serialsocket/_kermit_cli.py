@@ -28,7 +28,17 @@ from .argtypes import (
     RETRIES,
     SERIAL_PORT,
 )
-from .kermit import KermitConfig, KermitStatistics, KermitTransferError, kermit_receive, kermit_send
+from .kermit import (
+    REMOTE_COMMANDS,
+    KermitConfig,
+    KermitStatistics,
+    KermitTransferError,
+    kermit_get,
+    kermit_receive,
+    kermit_remote,
+    kermit_send,
+    kermit_server,
+)
 
 __all__ = ["add_arguments", "kermit_main"]
 
@@ -40,6 +50,23 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     send.add_argument("files", metavar="FILE", nargs="+", help="files to send (binary mode)")
     recv = sub.add_parser("receive", help="receive files from a Kermit sender")
     recv.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
+    server = sub.add_parser(
+        "server",
+        help="serve DIR to a Kermit client (GET, SEND, REMOTE DIR/CD/DELETE/SPACE, FINISH, BYE)",
+    )
+    server.add_argument(
+        "directory", metavar="DIR", nargs="?", default=".", help="the served tree (default: .)"
+    )
+    get = sub.add_parser("get", help="ask a Kermit server for files (C-Kermit's GET)")
+    get.add_argument("spec", metavar="REMOTE_FILE", help="file name or pattern on the server")
+    get.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
+    remote = sub.add_parser(
+        "remote", help="a REMOTE command to a Kermit server; its answer goes to stdout"
+    )
+    remote.add_argument("remote_command", metavar="COMMAND", choices=sorted(REMOTE_COMMANDS))
+    remote.add_argument(
+        "argument", metavar="ARG", nargs="?", default="", help="directory or file pattern"
+    )
     send.add_argument(
         "--resend",
         action="store_true",
@@ -50,7 +77,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         action="store_true",
         help="text mode: LF line ends go as CR LF (the receiver restores its own)",
     )
-    for p in (send, recv):
+    for p in (send, recv, server, get, remote):
         p.add_argument(
             "--port", type=SERIAL_PORT, required=True, help="device path, pty or pyserial URL"
         )
@@ -139,11 +166,23 @@ def _config(args: argparse.Namespace) -> KermitConfig:
     )
 
 
-async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatistics:
+async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatistics | None:
     port = await open_port(args.port, args.baud or 9600)
     async with port:
-        if args.kermit_command == "send":
+        command = args.kermit_command
+        if command == "send":
             return await kermit_send(port, args.files, config)
+        if command == "server":
+            count = await kermit_server(port, args.directory, config)
+            print(f"serialsocket kermit: server done after {count} requests", file=sys.stderr)
+            return None
+        if command == "get":
+            return await kermit_get(port, args.spec, args.directory, config)
+        if command == "remote":
+            text = await kermit_remote(port, args.remote_command, args.argument, config)
+            if text:
+                sys.stdout.write(text if text.endswith("\n") else text + "\n")
+            return None
         return await kermit_receive(port, args.directory, config)
 
 
@@ -169,6 +208,9 @@ def kermit_main(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         print(f"serialsocket kermit: {exc}", file=sys.stderr)
         return 2
+    except EOFError as exc:
+        print(f"serialsocket kermit: {exc}", file=sys.stderr)
+        return 1
     except OSError as exc:
         print(f"serialsocket kermit: {exc}", file=sys.stderr)
         return 2
@@ -178,6 +220,6 @@ def kermit_main(args: argparse.Namespace) -> int:
         if args.stats:
             _print_stats(exc.statistics)
         return 1
-    if args.stats:
+    if args.stats and stats is not None:
         _print_stats(stats)
     return 0

@@ -38,6 +38,7 @@ SANS_IO = [
     "kermit/_params",
     "kermit/_receiver",
     "kermit/_sender",
+    "kermit/_server",
     "kermit/_window",
 ]
 FORBIDDEN_IN_CORE = {
@@ -167,15 +168,21 @@ def test_public_names_are_pinned() -> None:
             "KermitConfig",
             "KermitEvent",
             "KermitReceiver",
+            "REMOTE_COMMANDS",
             "KermitSender",
+            "KermitServer",
             "KermitState",
             "KermitStatistics",
             "KermitTransferError",
             "OutgoingFile",
+            "RemoteReply",
             "TransferComplete",
             "TransferFailed",
+            "kermit_get",
             "kermit_receive",
+            "kermit_remote",
             "kermit_send",
+            "kermit_server",
         ]
     )
     assert sorted(capture.__all__) == sorted(

@@ -33,7 +33,13 @@ import trio
 
 from linksim.link import DirectionConfig, LinkConfig, run_relay
 from serialsocket import open_port
-from serialsocket.kermit import KermitConfig, KermitStatistics, kermit_receive, kermit_send
+from serialsocket.kermit import (
+    KermitConfig,
+    KermitStatistics,
+    kermit_receive,
+    kermit_send,
+    kermit_server,
+)
 
 __all__ = [
     "DEFAULT_PAIRS",
@@ -43,6 +49,7 @@ __all__ = [
     "available",
     "bad_pairing",
     "run_bench_kermit",
+    "run_against_server",
     "run_interrupted",
     "run_transfer",
 ]
@@ -360,6 +367,103 @@ def run_interrupted(
     """
     held = trio.run(_cut, setup, path, out_dir, cut)
     return held, run_transfer(replace(setup, resend=True), [path], out_dir)
+
+
+def _ckermit_client_argv(setup: TransferSetup, line: str, commands: Sequence[str]) -> list[str]:
+    """C-Kermit as a server's client: the line settings, ``commands``, then EXIT.
+
+    A command starting with ``-`` is C-Kermit command-line flags instead
+    (``-g FILE``: its GET action, run after the settings).
+    """
+    argv = _ckermit_argv(setup, line, [])
+    if commands and commands[0].startswith("-"):
+        settings = [c for c in argv[-1].split(", ")[:-2] if not c.startswith("set line")]
+        return ["kermit", "-Y", "-q", "-B", "-l", line, "-C", ", ".join(settings)] + [
+            *commands[0].split()
+        ]
+    settings = argv[-1].split(", ")[:-2]  # drop RECEIVE and EXIT
+    script = ", ".join([*settings, *commands, "exit \\v(status)"])
+    return [*argv[:-1], script]
+
+
+async def _against_server(
+    setup: TransferSetup,
+    served: pathlib.Path,
+    client_dir: pathlib.Path,
+    commands: Sequence[str],
+) -> tuple[int, int, str]:
+    direction = DirectionConfig(
+        rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
+    )
+    config = LinkConfig.symmetric(direction, seed=setup.seed)
+    count: list[int] = []
+    with trio.fail_after(setup.limit):
+        async with trio.open_nursery() as nursery:
+            ready: list[tuple[str, str]] = []
+            got_paths = trio.Event()
+
+            def on_ready(a: str, b: str) -> None:
+                ready.append((a, b))
+                got_paths.set()
+
+            nursery.start_soon(lambda: run_relay(config, stop=trio.Event(), on_ready=on_ready))
+            await got_paths.wait()
+            line_a, line_b = ready[0]
+
+            async def serve() -> None:
+                port = await open_port(line_b)
+                async with port:
+                    count.append(await kermit_server(port, served, _our_config(setup)))
+
+            nursery.start_soon(serve)
+            await trio.sleep(_START_GAP)
+            if setup.sender == "gkermit":  # G-Kermit on stdin/stdout: its flags only
+                fd = os.open(line_a, os.O_RDWR | os.O_NOCTTY)
+                try:
+                    argv = ["gkermit", "-q", "-i", "-w", "-b", str(setup.timeout)]
+                    result = await trio.run_process(
+                        [*argv, *commands[0].split()],
+                        cwd=client_dir,
+                        stdin=fd,
+                        stdout=fd,
+                        capture_stderr=True,
+                        check=False,
+                    )
+                finally:
+                    os.close(fd)
+            else:
+                result = await trio.run_process(
+                    _ckermit_client_argv(setup, line_a, commands),
+                    cwd=client_dir,
+                    capture_stdout=True,
+                    capture_stderr=True,
+                    check=False,
+                )
+            with trio.move_on_after(max(4 * setup.timeout, 10)):
+                while not count:
+                    await trio.sleep(0.05)
+            nursery.cancel_scope.cancel()
+    output = ((result.stdout or b"") + (result.stderr or b"")).decode("utf-8", "replace")
+    return (count[0] if count else -1), result.returncode, output
+
+
+def run_against_server(
+    setup: TransferSetup,
+    served: pathlib.Path,
+    client_dir: pathlib.Path,
+    commands: Sequence[str],
+) -> tuple[int, int, str]:
+    """A client runs ``commands`` against our server serving ``served``.
+
+    The client is ``setup.sender``: C-Kermit runs ``commands`` (GET, REMOTE
+    ..., FINISH; or one string of command-line flags such as ``-g FILE``);
+    G-Kermit runs the flags in ``commands[0]`` (``-g FILE``).
+
+    Returns:
+        Our server's transaction count (-1 if it had not ended when C-Kermit
+        did), C-Kermit's exit status, and its output.
+    """
+    return trio.run(_against_server, setup, served, client_dir, commands)
 
 
 def _setup(pair: str, base: TransferSetup, seed: int) -> TransferSetup:

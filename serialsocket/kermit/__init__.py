@@ -29,8 +29,11 @@ then :class:`TransferComplete` or :class:`TransferFailed`.
 :class:`KermitConfig` holds the local settings (``max_packet_length``,
 ``window``, ``check`` as a :class:`serialsocket.packets.BlockCheck`,
 ``timeout``, ``retry_limit``, ``seven_bit``, ``repeat``, ``attributes``).
-Command line: ``python -m serialsocket kermit send|receive``; details and
-interop notes: serialsocket/KERMIT.md.
+Server mode: :func:`kermit_server` serves a directory until FINISH or BYE
+(:class:`KermitServer` is its sans-I/O core); :func:`kermit_get` and
+:func:`kermit_remote` (one of :data:`REMOTE_COMMANDS`) are the client.
+Command line: ``python -m serialsocket kermit send|receive|server|get|remote``;
+details and interop notes: serialsocket/KERMIT.md.
 """
 
 from ._core import FileCompleted as FileCompleted
@@ -40,6 +43,7 @@ from ._core import KermitEvent as KermitEvent
 from ._core import KermitState as KermitState
 from ._core import KermitStatistics as KermitStatistics
 from ._core import OutgoingFile as OutgoingFile
+from ._core import RemoteReply as RemoteReply
 from ._core import TransferComplete as TransferComplete
 from ._core import TransferFailed as TransferFailed
 from ._io import KermitTransferError as KermitTransferError
@@ -49,9 +53,15 @@ from ._params import MAX_KERMIT_WINDOW as MAX_KERMIT_WINDOW
 from ._params import KermitConfig as KermitConfig
 from ._receiver import KermitReceiver as KermitReceiver
 from ._sender import KermitSender as KermitSender
+from ._serve import REMOTE_COMMANDS as REMOTE_COMMANDS
+from ._serve import kermit_get as kermit_get
+from ._serve import kermit_remote as kermit_remote
+from ._serve import kermit_server as kermit_server
+from ._server import KermitServer as KermitServer
 
 __all__ = [
     "MAX_KERMIT_WINDOW",
+    "REMOTE_COMMANDS",
     "FileCompleted",
     "FileData",
     "FileStarted",
@@ -59,12 +69,17 @@ __all__ = [
     "KermitEvent",
     "KermitReceiver",
     "KermitSender",
+    "KermitServer",
     "KermitState",
     "KermitStatistics",
     "KermitTransferError",
     "OutgoingFile",
+    "RemoteReply",
     "TransferComplete",
     "TransferFailed",
+    "kermit_get",
     "kermit_receive",
+    "kermit_remote",
     "kermit_send",
+    "kermit_server",
 ]

@@ -79,6 +79,7 @@ __all__ = [
     "KermitState",
     "KermitStatistics",
     "OutgoingFile",
+    "RemoteReply",
     "TransferComplete",
     "TransferFailed",
 ]
@@ -118,7 +119,7 @@ class KermitState(enum.Enum):
     SEND_BREAK = "send-break"
     """Sender: B sent, waiting for its ACK."""
     RECEIVE_INIT = "receive-init"
-    """Receiver: waiting for S."""
+    """Receiver: waiting for S (a client: its R or G request sent, waiting for S or the ACK)."""
     RECEIVE_FILE = "receive-file"
     """Receiver: waiting for F (next file) or B (end of batch)."""
     RECEIVE_DATA = "receive-data"
@@ -137,7 +138,7 @@ TRANSITIONS: dict[KermitState, frozenset[KermitState]] = {
     _S.SEND_DATA: frozenset({_S.SEND_EOF, _S.FAILED}),
     _S.SEND_EOF: frozenset({_S.SEND_FILE, _S.SEND_BREAK, _S.FAILED}),
     _S.SEND_BREAK: frozenset({_S.DONE, _S.FAILED}),
-    _S.RECEIVE_INIT: frozenset({_S.RECEIVE_FILE, _S.FAILED}),
+    _S.RECEIVE_INIT: frozenset({_S.RECEIVE_FILE, _S.DONE, _S.FAILED}),
     _S.RECEIVE_FILE: frozenset({_S.RECEIVE_DATA, _S.DONE, _S.FAILED}),
     _S.RECEIVE_DATA: frozenset({_S.RECEIVE_FILE, _S.FAILED}),
     _S.DONE: frozenset(),
@@ -163,19 +164,33 @@ class OutgoingFile:
 
     ``date`` is the modification time as the A packet carries it,
     ``yyyymmdd hh:mm:ss`` (the caller formats it: the core reads no clock).
+    ``screen``: text for the other side's screen (a server's reply to REMOTE
+    DIR): sent with an X header instead of F, without attributes.
     """
 
     name: str
     size: int | None
     source: Readable
     date: str | None = None
+    screen: bool = False
 
 
 @dataclass(frozen=True, slots=True)
 class FileStarted:
-    """A file began (F packet); ``size`` comes from the A packet, when one is sent later."""
+    """A file began (F packet); ``size`` comes from the A packet, when one is sent later.
+
+    ``screen``: an X header -- text for the screen (a server's reply), not a file.
+    """
 
     name: str
+    screen: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class RemoteReply:
+    """A server answered a client's request with a short text in its ACK (client only)."""
+
+    text: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,7 +239,9 @@ class TransferFailed:
     by_peer: bool
 
 
-KermitEvent = FileStarted | FileData | FileCompleted | TransferComplete | TransferFailed
+KermitEvent = (
+    FileStarted | FileData | FileCompleted | RemoteReply | TransferComplete | TransferFailed
+)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -38,6 +38,7 @@ from ._core import (
     KermitEvent,
     KermitStatistics,
     OutgoingFile,
+    RemoteReply,
     TransferComplete,
     TransferFailed,
 )
@@ -216,8 +217,14 @@ async def kermit_receive(
     config: KermitConfig | None = None,
     *,
     on_event: Callable[[KermitEvent], None] | None = None,
+    request: tuple[str, bytes] | None = None,
+    screen: Callable[[str], None] | None = None,
 ) -> KermitStatistics:
     """Receive files from a Kermit sender on ``port`` into ``directory``.
+
+    ``request`` makes this a server's client: the R (GET) or G (REMOTE)
+    packet sent first (see :class:`KermitReceiver`); text the server sends
+    for the screen (X) and its short answers go to ``screen``.
 
     File names are reduced with :func:`safe_file_name`; an existing file of
     the same name is replaced when the new one is complete.  A file the
@@ -242,11 +249,13 @@ async def kermit_receive(
     target = pathlib.Path(directory)
     if not target.is_dir():
         raise NotADirectoryError(f"{target} is not a directory: create it or pick another")
-    store = _Store(target)
-    receiver = KermitReceiver(config, trio.current_time(), policy=store.decide)
+    store = _Store(target, screen)
+    receiver = KermitReceiver(config, trio.current_time(), policy=store.decide, request=request)
 
     def handle(event: KermitEvent) -> None:
         (on_event or _log_event)(event)
+        if isinstance(event, RemoteReply) and screen is not None:
+            screen(event.text)
         try:
             store.on_event(event, receiver.attributes)
         except OSError as exc:
@@ -275,8 +284,10 @@ class _Store:
     previous attempt left before anything truncates them.
     """
 
-    def __init__(self, target: pathlib.Path) -> None:
+    def __init__(self, target: pathlib.Path, screen: Callable[[str], None] | None = None) -> None:
         self.target = target
+        self.screen = screen
+        self.showing = False
         self.final = target
         self.part = target
         self.file: BinaryIO | None = None
@@ -316,9 +327,17 @@ class _Store:
 
     def on_event(self, event: KermitEvent, attributes: FileAttributes) -> None:
         """Store what the receiver reports (raises OSError when the disk fails)."""
-        if isinstance(event, FileStarted):
+        if isinstance(event, FileStarted) and event.screen:
+            self.showing = True  # an X header: text for the screen, not a file
+        elif isinstance(event, FileStarted):
+            self.showing = False
             self._paths(event.name)
             self.file, self.append, self.written, self.active = None, False, 0, True
+        elif isinstance(event, FileData) and self.showing:
+            if self.screen is not None:
+                self.screen(event.data.decode("utf-8", "replace"))
+        elif isinstance(event, FileCompleted) and self.showing:
+            self.showing = False
         elif isinstance(event, FileData) and self.active:
             self._open().write(event.data)
             self.written += len(event.data)

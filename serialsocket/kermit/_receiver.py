@@ -21,11 +21,13 @@ from ._attributes import (
     parse_attributes,
 )
 from ._core import (
+    _PLAIN,
     FileCompleted,
     FileData,
     FileStarted,
     KermitSide,
     KermitState,
+    RemoteReply,
     TransferComplete,
 )
 from ._params import INIT_TIMEOUT, KermitConfig, line_timeout
@@ -60,10 +62,21 @@ class KermitReceiver(KermitSide):
         now: the current time (starts the wait for S).
         policy: decides on each file from its A packet (see
             :data:`AttributePolicy`); default :func:`accept_all`.
+        request: a client's request to a server, sent first (seq 0, type-1
+            check) and again on each timeout until the answer comes: ``("R",
+            filespec)`` for GET, ``("G", subcommand + arguments)`` for REMOTE
+            commands.  The server answers with S (files, or screen text under
+            an X header, received as usual) or with an ACK whose text ends the
+            transaction (:class:`RemoteReply`, then :class:`TransferComplete`).
     """
 
     def __init__(
-        self, config: KermitConfig, now: float, *, policy: AttributePolicy | None = None
+        self,
+        config: KermitConfig,
+        now: float,
+        *,
+        policy: AttributePolicy | None = None,
+        request: tuple[str, bytes] | None = None,
     ) -> None:
         super().__init__(config, KermitState.RECEIVE_INIT)
         self._window = ReceiveWindow(1, 0)
@@ -74,6 +87,11 @@ class KermitReceiver(KermitSide):
         self._text: TextDecoder | None = None
         self._attributes = FileAttributes()
         self._started = now
+        self._request: bytes | None = None
+        if request is not None:
+            ptype, data = request
+            field, _ = _PLAIN.encode_prefix(data, 90)
+            self._request = self._emit(Packet(seq=0, type=ptype, data=field), init=True)
         self._deadline = now + self._timeout()
 
     @property
@@ -108,6 +126,13 @@ class KermitReceiver(KermitSide):
     def _on_packet(self, packet: Packet, now: float) -> None:
         window = self._window
         if self._state is KermitState.RECEIVE_INIT:
+            if self._request is not None and packet.type == PacketType.ACK and packet.seq == 0:
+                # The server's short answer to our request (REMOTE CD, ...).
+                self._events.append(RemoteReply(self._decode_text(packet.data)))
+                self._goto(KermitState.DONE)
+                self._deadline = None
+                self._events.append(TransferComplete())
+                return
             if packet.type != PacketType.SEND_INIT:
                 return  # noise before the transfer, or a peer in another mode
             self._negotiate(packet.data)
@@ -149,14 +174,15 @@ class KermitReceiver(KermitSide):
     def _deliver(self, packet: Packet) -> bytes:
         """Act on the next in-order packet; returns the data for its ACK."""
         ptype, state = packet.type, self._state
-        if state is KermitState.RECEIVE_FILE and ptype == PacketType.FILE:
+        if state is KermitState.RECEIVE_FILE and ptype in (PacketType.FILE, PacketType.TEXT):
             name = self._decode(packet.data).decode("utf-8", "replace")
-            self._name = name if self.config.literal_names else local_form(name)
+            screen = ptype == PacketType.TEXT
+            self._name = name if self.config.literal_names or screen else local_form(name)
             self._size = None
             self._text = None
             self._attributes = FileAttributes()
             self._goto(KermitState.RECEIVE_DATA)
-            self._events.append(FileStarted(self._name))
+            self._events.append(FileStarted(self._name, screen=screen))
         elif state is KermitState.RECEIVE_FILE and ptype == PacketType.BREAK:
             self._goto(KermitState.DONE)
             self._deadline = None
@@ -230,6 +256,9 @@ class KermitReceiver(KermitSide):
                 else f"packet {self._window.low} never arrived"
             )
             self._give_up(what, self._retries, now)
+            return
+        if self._request is not None and self._state is KermitState.RECEIVE_INIT:
+            self._resend(self._request)  # the request or its answer was lost
             return
         self._window.forget_naks()
         self._nak(self._window.low)

@@ -74,6 +74,7 @@ class KermitSender(KermitSide):
         self._started = now
         self._srtt: float | None = None
         self._rttvar = 0.0
+        self._min_rtt: float | None = None  # the shortest sample: the path, not its queue
         self._backoff = 1
         self._length = 0  # current D packet length (0 until negotiated)
         self._d_chars = 0.0  # D characters sent, resends included (error estimate)
@@ -126,6 +127,8 @@ class KermitSender(KermitSide):
         if slot.retries:
             return
         sample = max(now - slot.sent_at, 0.0)
+        if self._min_rtt is None or sample < self._min_rtt:
+            self._min_rtt = sample
         if self._srtt is None:
             self._srtt, self._rttvar = sample, sample / 2
         else:
@@ -146,7 +149,9 @@ class KermitSender(KermitSide):
         that times the data share (L - overhead) / L times the rate the
         window allows -- the line rate, or a window of packets per round
         trip when the round trip is longer (the configured delay, or the
-        measured one).  Candidates run from 96 to the negotiated maximum.
+        shortest one measured: longer samples include the queue the window
+        itself builds at the port, which a longer packet would only lengthen).
+        Candidates run from 96 to the negotiated maximum.
         """
         neg = self._neg
         assert neg is not None
@@ -155,7 +160,7 @@ class KermitSender(KermitSide):
             return top
         p = (self._d_errors + _PRIOR_ERRORS) / (self._d_chars + _PRIOR_CHARS)
         cps = 1.0 / line_time(1, self.config.rate)
-        rtt = max(2 * self.config.delay, self._srtt or 0.0)
+        rtt = max(2 * self.config.delay, self._min_rtt or 0.0)
         best, best_rate = _MIN_DYNAMIC_LENGTH, -1.0
         length = float(_MIN_DYNAMIC_LENGTH)
         while True:
@@ -240,7 +245,8 @@ class KermitSender(KermitSide):
                 )
             self._next_file(now)
         elif state is KermitState.SEND_FILE:
-            if self._neg is not None and self._neg.attributes:
+            assert self._file is not None
+            if self._neg is not None and self._neg.attributes and not self._file.screen:
                 self._goto(KermitState.SEND_ATTRIBUTES)
                 self._send(PacketType.ATTRIBUTES, self._attributes(), now)
             else:
@@ -286,9 +292,14 @@ class KermitSender(KermitSide):
         self._goto(KermitState.SEND_FILE)
         assert self._neg is not None
         capacity = data_capacity(self._neg.send_max_length, self._neg.check)
-        name = self._file.name if self.config.literal_names else common_form(self._file.name)
+        file = self._file
+        if file.screen:  # text for the screen: an X header, as it is, no attributes
+            self._send(PacketType.TEXT, self._file_name(file.name, capacity), now)
+            self._events.append(FileStarted(file.name, screen=True))
+            return
+        name = file.name if self.config.literal_names else common_form(file.name)
         self._send(PacketType.FILE, self._file_name(name, capacity), now)
-        self._events.append(FileStarted(self._file.name))
+        self._events.append(FileStarted(file.name))
 
     def _resending(self) -> bool:
         """This file goes with RESEND: asked for, negotiated, binary."""
