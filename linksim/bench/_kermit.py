@@ -48,8 +48,8 @@ __all__ = [
     "TransferSetup",
     "available",
     "bad_pairing",
-    "run_bench_kermit",
     "run_against_server",
+    "run_bench_kermit",
     "run_interrupted",
     "run_transfer",
 ]
@@ -378,9 +378,8 @@ def _ckermit_client_argv(setup: TransferSetup, line: str, commands: Sequence[str
     argv = _ckermit_argv(setup, line, [])
     if commands and commands[0].startswith("-"):
         settings = [c for c in argv[-1].split(", ")[:-2] if not c.startswith("set line")]
-        return ["kermit", "-Y", "-q", "-B", "-l", line, "-C", ", ".join(settings)] + [
-            *commands[0].split()
-        ]
+        flags = commands[0].split()
+        return ["kermit", "-Y", "-q", "-B", "-l", line, "-C", ", ".join(settings), *flags]
     settings = argv[-1].split(", ")[:-2]  # drop RECEIVE and EXIT
     script = ", ".join([*settings, *commands, "exit \\v(status)"])
     return [*argv[:-1], script]
