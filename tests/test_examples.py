@@ -13,6 +13,13 @@ EXAMPLES = sorted((pathlib.Path(__file__).resolve().parents[1] / "examples").glo
 # What each example must print: proof it did its job, not just that it exited 0.
 EXPECTED = {
     "async_controller.py": ["MOVE_JOINT   done, joint 1 =   20.0 deg", "refused: UNREACHABLE"],
+    "asyncio_serial.py": [
+        "arm: 3 commands: MOVE_JOINT 1 20deg | STATUS | OPEN_FINGERS",
+        "controller: DONE OPEN_FINGERS",
+        "controller: closed cleanly: True",
+        "arm: closed cleanly: True",
+        "trio imported: False",
+    ],
     "blocking_controller.py": [
         "joints: [0.0, 90.0, -200.0, 0.0, -70.0, 0.0]",
         "refused: NOT_GRASPING",
