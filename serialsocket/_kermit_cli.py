@@ -110,6 +110,14 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
             help="always send the longest packets the receiver accepts (no dynamic length)",
         )
         p.add_argument(
+            "--streaming",
+            "--reliable",
+            dest="streaming",
+            action="store_true",
+            help="the line is reliable (a serial socket, TCP): offer streaming, no ACK per "
+            "packet; any transmission error is then fatal",
+        )
+        p.add_argument(
             "--literal-names",
             action="store_true",
             help="file names as they are (default: common form on send, lower case on receive)",
@@ -153,6 +161,7 @@ def _config(args: argparse.Namespace) -> KermitConfig:
         window=args.window,
         check=BlockCheck(3 if args.check == 5 else args.check),
         force3=args.check == 5,
+        streaming=args.streaming,
         timeout=args.timeout,
         retry_limit=args.retries,
         seven_bit=args.seven_bit,

@@ -95,6 +95,9 @@ class TransferSetup:
         resend: the sender uses RESEND (ours ``resend``, C-Kermit ``resend``).
         dynamic_length: ours chooses its D packet length (False: always the
             longest, as the bench compared before).
+        streaming: every side offers streaming (C-Kermit ``set reliable on``,
+            ``set streaming on``; G-Kermit without ``-S``; ours ``streaming``)
+            -- for reliable lines only.
         force3: ours uses FORCE-3 (block check 5; C-Kermit's own side is
             set through ``extra_ckermit``).
         extra_ckermit: more C-Kermit commands, before SEND/RECEIVE.
@@ -116,6 +119,7 @@ class TransferSetup:
     resend: bool = False
     dynamic_length: bool = True
     force3: bool = False
+    streaming: bool = False
     extra_ckermit: tuple[str, ...] = ()
 
 
@@ -126,7 +130,8 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         "set carrier-watch off",
         "set flow none",
         "set parity space" if setup.seven_bit else "set parity none",
-        "set streaming off",
+        "set reliable on" if setup.streaming else "set reliable off",
+        "set streaming on" if setup.streaming else "set streaming off",
         "set file type text" if setup.text else "set file type binary",
         "set transfer mode manual",
         "set file names literal" if setup.literal_names else "set file names converted",
@@ -154,7 +159,9 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
 
 def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[str]:
     """G-Kermit on stdin/stdout: binary, literal names, overwrite, no streaming."""
-    argv = ["gkermit", "-q", "-w", "-S", "-b", str(setup.timeout)]
+    argv = ["gkermit", "-q", "-w", "-b", str(setup.timeout)]
+    if not setup.streaming:
+        argv.append("-S")
     argv.append("-T" if setup.text else "-i")
     if setup.literal_names:
         argv.append("-P")
@@ -176,6 +183,7 @@ def _our_config(setup: TransferSetup) -> KermitConfig:
         resend=setup.resend,
         dynamic_length=setup.dynamic_length,
         force3=setup.force3,
+        streaming=setup.streaming,
     )
 
 

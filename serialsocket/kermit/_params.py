@@ -38,7 +38,7 @@ from serialsocket._wire import (
 __all__ = ["KermitConfig", "KermitInit", "KermitNegotiated", "negotiate_kermit"]
 
 _CAP_LONG, _CAP_WINDOWS, _CAP_ATTRIBUTES, _CAP_RESEND = 2, 4, 8, 16
-_WHATAMI_VALID, _WHATAMI_BINARY = 32, 2
+_WHATAMI_VALID, _WHATAMI_STREAM, _WHATAMI_BINARY = 32, 8, 2
 _ASSUMED_RATE = 9600
 """bit/s the timers assume when the line rate is not given (the port's default rate)."""
 _BITS_PER_CHAR = 10
@@ -108,6 +108,11 @@ class KermitConfig:
         seven_bit: the line carries 7 bits only: ask for 8th-bit prefixing.
         repeat: offer repeat-count compression (``~``).
         attributes: offer attribute (A) packets (size, type, date, disposition).
+        streaming: the transport below is reliable (a serial socket, TCP):
+            offer streaming (WHATAMI bit 8, C-Kermit's SET STREAMING ON /
+            SET RELIABLE ON).  Used only when the peer offers it too; then D
+            packets are not acknowledged and any transmission error ends the
+            transfer, as in C-Kermit.  Never on a raw, impaired line.
         force3: FORCE-3 (C-Kermit's SET BLOCK-CHECK 5): CHKT ``5`` and a
             CRC-16 on every packet, S and its ACK included.  A receiver
             answers a FORCE-3 S this way whatever this says.
@@ -137,6 +142,7 @@ class KermitConfig:
     rate: int | None = None
     dynamic_length: bool = True
     force3: bool = False
+    streaming: bool = False
     recovery: bool = True
     resend: bool = False
     text: bool = False
@@ -198,6 +204,7 @@ class KermitInit:
     window: int
     recovery: bool = False
     force3: bool = False
+    streaming: bool = False
 
     @classmethod
     def mine(cls, config: KermitConfig) -> KermitInit:
@@ -219,6 +226,7 @@ class KermitInit:
             window=config.window,
             recovery=config.recovery and config.attributes,
             force3=config.force3,
+            streaming=config.streaming,
         )
 
     def encode(self) -> bytes:
@@ -247,7 +255,9 @@ class KermitInit:
                 tochar(n % 95),
                 ord("0"),
                 *b"___",
-                tochar(_WHATAMI_VALID | _WHATAMI_BINARY),
+                tochar(
+                    _WHATAMI_VALID | _WHATAMI_BINARY | (_WHATAMI_STREAM if self.streaming else 0)
+                ),
             ]
         )
 
@@ -295,7 +305,20 @@ class KermitInit:
             window=common.window,
             recovery=caps >= 0 and bool(caps & _CAP_RESEND),
             force3=common.force_check,
+            streaming=bool(_whatami(data) & _WHATAMI_STREAM),
         )
+
+
+def _whatami(data: bytes) -> int:
+    """The WHATAMI bits of an init field (0 when absent or not marked valid)."""
+    i = 9  # CAPAS, then as many more CAPAS bytes as have the continuation bit
+    while i < len(data) and unchar(data[i]) & 1:
+        i += 1
+    at = i + 8  # WINDO, MAXLX1, MAXLX2, CHKPNT, CHKINT x 3, then WHATAMI
+    if at >= len(data):
+        return 0
+    bits = unchar(data[at])
+    return bits if bits & _WHATAMI_VALID else 0
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -311,6 +334,8 @@ class KermitNegotiated:
         receive_encoding: prefixes the peer uses (its QCTL).
         attributes: both sides do A packets.
         recovery: both sides do RESEND (CAPAS 16, with attributes).
+        streaming: both sides offered streaming (WHATAMI bit 8): D packets
+            are not acknowledged.
         timeout: our timeout before anything is measured, s: the fixed one,
             else the line's (:func:`line_timeout`; a receiver also waits at
             least the peer's TIME).
@@ -326,6 +351,7 @@ class KermitNegotiated:
     receive_encoding: Encoding
     attributes: bool
     recovery: bool
+    streaming: bool
     timeout: float
     peer_time: float
     retry_limit: int
@@ -388,6 +414,7 @@ def negotiate_kermit(
         receive_encoding=receive_encoding,
         attributes=mine.attributes and theirs.attributes,
         recovery=mine.recovery and theirs.recovery and mine.attributes and theirs.attributes,
+        streaming=mine.streaming and theirs.streaming,
         timeout=timeout,
         peer_time=theirs.timeout,
         retry_limit=retry_limit,

@@ -142,10 +142,18 @@ class KermitReceiver(KermitSide):
             self._goto(KermitState.RECEIVE_FILE)
             self._progress(now)
             return
+        streaming = self._neg is not None and self._neg.streaming
+        if streaming and packet.type == PacketType.DATA and packet.seq != window.low:
+            # A reliable transport never loses or reorders: this is fatal (ckcfn2.c).
+            self.abort(
+                "Transmission error on reliable link",
+                message=f"streaming: D {packet.seq} arrived, {window.low} expected",
+            )
+            return
         if window.in_window(packet.seq):
             self._progress(now)
             window.hold(packet)
-            if packet.type == PacketType.DATA:
+            if packet.type == PacketType.DATA and not streaming:
                 # "I have it": a D is ACKed on arrival, in or out of order.
                 self._ack(packet.seq)
             # Anything else is ACKed in _deliver, once every packet before it
@@ -238,6 +246,9 @@ class KermitReceiver(KermitSide):
     def _on_damage(self, now: float) -> None:
         if self._state is KermitState.RECEIVE_INIT:
             return  # nothing to NAK yet; the timer NAKs 0
+        if self._neg is not None and self._neg.streaming:
+            self.abort("Transmission error on reliable link")
+            return
         gap = self._window.gap_to_nak()
         if gap is None:
             gap = self._window.low
@@ -260,5 +271,7 @@ class KermitReceiver(KermitSide):
         if self._request is not None and self._state is KermitState.RECEIVE_INIT:
             self._resend(self._request)  # the request or its answer was lost
             return
+        if self._neg is not None and self._neg.streaming:
+            return  # no NAKs while streaming: the sender takes one as fatal
         self._window.forget_naks()
         self._nak(self._window.low)

@@ -42,6 +42,9 @@ characters (2.5e-4 per character); measured characters and errors soon
 outweigh it."""
 _RTT_GAIN, _RTTVAR_GAIN = 0.125, 0.25
 """RFC 6298's gains for the smoothed round trip and its variation."""
+_STREAM_BURST = 32
+"""D packets queued per step while streaming: the driver's port write between
+steps paces the sender, and the output buffer stays bounded (32 x 9 KB)."""
 _MAX_BACKOFF = 8
 """Consecutive timeouts double the timeout up to this factor (reset by progress)."""
 
@@ -80,6 +83,8 @@ class KermitSender(KermitSide):
         self._d_chars = 0.0  # D characters sent, resends included (error estimate)
         self._d_errors = 0.0  # D packets resent (error estimate)
         self._refusal: str | None = None
+        self._refill = False  # streaming: more D packets to queue at the next step
+        self._streamed = 0  # streaming: file bytes sent, confirmed by the ACK of Z
         self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
 
     def _error_seq(self) -> int:
@@ -208,6 +213,10 @@ class KermitSender(KermitSide):
         elif packet.type == PacketType.NAK:
             self._naks_received += 1
             slot = window.get(packet.seq)
+            if self._streaming() and self._state in (KermitState.SEND_DATA, KermitState.SEND_EOF):
+                # C-Kermit: any error while streaming is fatal (ckcfn2.c).
+                self.abort("NAK received on reliable link")
+                return
             if self._state is KermitState.SEND_INIT:
                 self._retransmit_oldest(now)  # even NAK(1): the ACK of S carries parameters
             elif slot is not None and not slot.acked:
@@ -272,6 +281,8 @@ class KermitSender(KermitSide):
             self._fill(now)
         elif state is KermitState.SEND_EOF:
             assert self._file is not None
+            self._window.acknowledged_bytes += self._streamed  # Z's ACK confirms them
+            self._streamed = 0
             self._files += 1
             self._events.append(FileCompleted(self._file.name, self._discard, reason=self._refusal))
             self._next_file(now)
@@ -371,6 +382,51 @@ class KermitSender(KermitSide):
         # printable; prefix-encoding it would turn tochar(3) = '#' into '##').
         return fields
 
+    def _streaming(self) -> bool:
+        return self._neg is not None and self._neg.streaming
+
+    def handle_timer(self, now: float) -> None:
+        """Call at :meth:`get_timer`'s time (while streaming: the next burst of D)."""
+        if self._refill and not self.finished:
+            self._refill = False
+            self._deadline = now + self._timeout()
+            self._fill(now)
+            return
+        super().handle_timer(now)
+
+    def _stream(self, now: float, capacity: int) -> None:
+        """Streaming: queue D packets without waiting for ACKs; none will come.
+
+        A burst at a time (:data:`_STREAM_BURST`); the timer is set to now so
+        that the driver comes back for the next one once it has written this
+        one to the port.  Z follows the last D at once; its ACK confirms them.
+        """
+        neg, file = self._neg, self._file
+        assert neg is not None
+        assert file is not None
+        for _ in range(_STREAM_BURST):
+            if len(self._pending) < capacity and not self._eof:
+                chunk = file.source.read(capacity * _READ_AHEAD)
+                if chunk:
+                    self._pending += to_crlf(chunk) if self.config.text else chunk
+                else:
+                    self._eof = True
+            if not self._pending or self._discard:
+                break
+            field, used = neg.send_encoding.encode_prefix(self._pending, capacity)
+            del self._pending[:used]
+            self._file_bytes += used
+            self._streamed += used
+            seq = self._seq
+            self._seq = (seq + 1) % SEQ_MODULUS
+            self._emit(Packet(seq=seq, type=PacketType.DATA, data=field))
+        if self._discard or (self._eof and not self._pending):
+            self._goto(KermitState.SEND_EOF)
+            self._send(PacketType.EOF, b"D" if self._discard else b"", now)
+        else:
+            self._refill = True
+            self._deadline = now
+
     def _fill(self, now: float) -> None:
         """Send D packets while the window has room; Z once the file is all acknowledged."""
         assert self._neg is not None
@@ -378,6 +434,9 @@ class KermitSender(KermitSide):
         neg = self._neg
         self._length = self._choose_length()
         capacity = data_capacity(self._length, neg.check)
+        if self._streaming():
+            self._stream(now, capacity)
+            return
         while not self._window.full and not self._discard:
             if len(self._pending) < capacity and not self._eof:
                 chunk = self._file.source.read(capacity * _READ_AHEAD)
@@ -397,6 +456,9 @@ class KermitSender(KermitSide):
             self._send(PacketType.EOF, b"D" if self._discard else b"", now)
 
     def _on_damage(self, now: float) -> None:
+        if self._streaming() and self._state in (KermitState.SEND_DATA, KermitState.SEND_EOF):
+            self.abort("Transmission error on reliable link")
+            return
         if self._state is KermitState.SEND_BREAK:
             # The receiver answered B; the answer was damaged.  See _BREAK_RETRIES.
             self._break_unacknowledged()

@@ -407,3 +407,46 @@ def test_force3_puts_a_crc_on_the_send_init_and_a_plain_receiver_follows() -> No
     assert got == data
     assert r_events[-1] == TransferComplete()
     assert sender.statistics().check is BlockCheck.CRC16
+
+
+# -- streaming -------------------------------------------------------------------------------
+
+
+def test_streaming_sends_d_packets_without_acks() -> None:
+    data = _payload(100_000)
+    config = KermitConfig(streaming=True)
+    sender = KermitSender([OutgoingFile("s", len(data), io.BytesIO(data))], config, 0.0)
+    receiver = KermitReceiver(config, 0.0)
+    got, s_events, _, _ = _simulate(sender, receiver, delay=0.5)
+    assert got == data
+    assert s_events[-1] == TransferComplete()
+    stats = sender.statistics()
+    # Only S, F, A, Z and B were answered; every D went unacknowledged.
+    assert receiver.statistics().packets_sent == 5
+    assert stats.packets_received == 5
+    assert stats.acknowledged_bytes == len(data)
+    assert stats.timeouts == 0
+    assert KermitInit.mine(config).encode()[-1] == 32 + 32 + 8 + 2  # WHATAMI: valid, stream, binary
+
+
+def test_streaming_needs_both_sides_else_windows() -> None:
+    data = _payload(20_000)
+    sender = KermitSender(
+        [OutgoingFile("s", len(data), io.BytesIO(data))], KermitConfig(streaming=True), 0.0
+    )
+    receiver = KermitReceiver(KermitConfig(), 0.0)
+    got, _, _, _ = _simulate(sender, receiver)
+    assert got == data
+    assert receiver.statistics().packets_sent > 5  # D packets were ACKed: no streaming
+
+
+def test_any_error_while_streaming_is_fatal() -> None:
+    data = _payload(50_000)
+    config = KermitConfig(streaming=True, timeout=5.0)
+    sender = KermitSender([OutgoingFile("s", len(data), io.BytesIO(data))], config, 0.0)
+    receiver = KermitReceiver(config, 0.0)
+    _, s_events, r_events, _ = _simulate(sender, receiver, error=2e-5, seed=1)
+    assert TransferFailed("Transmission error on reliable link", by_peer=False) in r_events
+    assert s_events[-1] == TransferFailed(
+        "peer reported: Transmission error on reliable link", by_peer=True
+    )

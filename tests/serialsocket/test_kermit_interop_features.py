@@ -195,3 +195,26 @@ def test_force3_with_c_kermit(tmp_path: pathlib.Path, sender: str, receiver: str
     assert result.ours is not None
     assert result.ours.check == 3
     assert result.ours.damaged == 0  # the CRC-checked S was read, not rejected
+
+
+# -- streaming ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("sender", "receiver"), NAME_PEERS)
+def test_streaming_on_a_clean_line(tmp_path: pathlib.Path, sender: str, receiver: str) -> None:
+    """C-Kermit (``set reliable on``, ``set streaming on``) and G-Kermit (its
+    default) stream with ours when both offer it: no ACK per D packet."""
+    _need(*(p for p in (sender, receiver) if p != "ours"))
+    src, out = _dirs(tmp_path)
+    path = src / "stream.bin"
+    path.write_bytes(random.Random(9).randbytes(200_000))
+    setup = TransferSetup(sender=sender, receiver=receiver, window=8, streaming=True, limit=60)
+    result = run_transfer(setup, [path], out)
+    ours = result.ours
+    assert ours is not None
+    # S, F, A, Z, B: the only packets answered (ours as sender) or sent (ours as receiver).
+    if sender == "ours":
+        assert ours.packets_received == 5, ours
+    else:
+        assert ours.packets_sent == 5, ours
+    assert (ours.naks_sent, ours.naks_received, ours.timeouts) == (0, 0, 0)
