@@ -13,7 +13,8 @@ bytes, events and timer deadlines out.
 
 :class:`SerialSocket` (``connect``, ``accept``, ``listen``, ``serve``) runs
 the endpoint over a port as a trio ``HalfCloseableStream``;
-:class:`BlockingSerialSocket` offers the same to code that is not async.
+:class:`BlockingSerialSocket` offers the same to code that is not async, and
+:mod:`serialsocket.asyncio` to asyncio code (it never imports trio).
 :class:`EndpointConfig`'s ``check`` and ``encoding`` come from
 :mod:`serialsocket.packets`.
 

@@ -23,6 +23,7 @@ SANS_IO = [
     "_endpoint",
     "_errors",
     "_events",
+    "_outcome",
     "_pacer",
     "_packet",
     "_params",
@@ -69,6 +70,16 @@ def imports_of(path: pathlib.Path) -> set[str]:
 def test_core_modules_are_sans_io(module: str) -> None:
     bad = imports_of(ROOT / "serialsocket" / f"{module}.py") & FORBIDDEN_IN_CORE
     assert not bad, f"serialsocket/{module}.py imports {bad}"
+
+
+# The asyncio adapter and everything it shares with the trio glue: no trio
+# (tests/serialsocket/test_asyncio_socket.py runs it with trio unimportable).
+TRIO_FREE = ["asyncio", "_asyncio_driver", "_asyncio_port", "_asyncio_streams", "_pyserial"]
+
+
+@pytest.mark.parametrize("module", TRIO_FREE)
+def test_the_asyncio_path_never_imports_trio(module: str) -> None:
+    assert "trio" not in imports_of(ROOT / "serialsocket" / f"{module}.py")
 
 
 @pytest.mark.parametrize(
