@@ -8,6 +8,7 @@ import json
 import math
 import os
 import pty
+import re
 import select
 import sys
 import time
@@ -29,6 +30,8 @@ from linksim.control._command_line import (
 from tcpstream import Command, CommandCode, CommandResult, Feedback
 
 DEG = math.pi / 180
+STAMP = re.compile(r"^\[ *\d+\.\d\d\]")
+"""The time stamp of an event line: ``[   12.19]``."""
 J1_20 = Command(CommandCode.MOVE_JOINT, (1.0, 20 * DEG))
 
 
@@ -280,11 +283,18 @@ def test_a_piped_session_is_the_same_every_time(
         "help lists the commands, Tab completes, quit ends"
     )
     assert "telelink> move_joint 1 20deg" in lines
-    assert (
-        "[   12.19] #1 COMPLETED: as predicted (joints 0.00 deg, hand 0.0 mm, fingers 0.0 mm "
-        "from the model)" in lines
-    )
-    assert any(line.startswith("[   12.47] #3 FAILED: JOINT_LIMIT") for line in lines)
+    # The times are the link's (serialsocket's timers); the words are the stack's.
+    events = [STAMP.sub("[t]", line) for line in lines if STAMP.match(line)]
+    assert events == [
+        "[t] #1 SENT",
+        "[t] #3 SENT",
+        "[t] #1 ACCEPTED (queue position 0)",
+        "[t] #3 ACCEPTED (queue position 1)",
+        "[t] #1 COMPLETED: as predicted (joints 0.00 deg, hand 0.0 mm, fingers 0.0 mm from the "
+        "model)",
+        "[t] #3 FAILED: JOINT_LIMIT: joint 1 would be at 220.0 deg, outside its range -160..160 "
+        "deg -- as predicted (joints 0.00 deg, hand 0.0 mm, fingers 0.0 mm from the model)",
+    ]
     assert "error: unknown command 'move_jiont'; did you mean move_joint" in err
     assert "Traceback" not in err
 
@@ -350,7 +360,7 @@ def test_at_a_terminal_tab_completes_and_ctrl_c_exits_130() -> None:
     try:
         assert "telelink> " in _read_until(fd, "telelink> ")
         os.write(fd, b"move_joint 1 20deg\r")
-        assert "#1 COMPLETED: as predicted" in _read_until(fd, "#1 COMPLETED")
+        assert "#1 COMPLETED: as predicted" in _read_until(fd, "#1 COMPLETED: as predicted")
         os.write(fd, b"stat\t\r")  # Tab completes "status"
         assert "model: 0 in flight" in _read_until(fd, "model: 0 in flight")
         os.write(fd, b"\x03")  # Ctrl-C, as the terminal sends it
@@ -368,7 +378,9 @@ def test_a_session_the_arm_ended_is_one_line_not_a_traceback(
     err = capsys.readouterr().err
     assert "Traceback" not in err
     lines = err.splitlines()
-    assert lines[-2].startswith("[   13.78] #2 FAILED: SessionClosed: the session is closed")
+    assert STAMP.sub("[t]", lines[-2]).startswith(
+        "[t] #2 FAILED: SessionClosed: the session is closed"
+    )
     assert lines[-2].endswith(
         "-- the session's failure, not the arm's: nothing to compare with the model"
     )
