@@ -132,14 +132,40 @@ def _build() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser
     )
     add_netcat_arguments(lis, listening=True)
     retype(lis, _NETCAT_TYPES)
+    _same_spellings(lis)
     con = sub.add_parser("connect", help="connect over PORT; stdin to the link, the link to stdout")
     add_netcat_arguments(con, listening=False)
     retype(con, _NETCAT_TYPES | {"connect_timeout": SECONDS})
+    _same_spellings(con)
     ker = sub.add_parser(
         "kermit", help="Kermit file transfer with C-Kermit, G-Kermit or ours (send, receive)"
     )
     add_kermit_arguments(ker)
     return ap, {"encode": enc, "decode": dec, "listen": lis, "connect": con, "kermit": ker}
+
+
+def _same_spellings(ap: argparse.ArgumentParser) -> None:
+    """listen/connect also take kermit's spellings: ``--port PORT`` (PORT may stay
+    positional) and ``--packet-length`` for ``--max-len``."""
+    for action in ap._actions:
+        if action.dest == "port" and not action.option_strings:
+            action.nargs = "?"
+            action.default = None
+    ap.add_argument(
+        "--packet-length",
+        dest="max_len",
+        type=ENDPOINT_LENGTH,
+        default=None,
+        metavar="MAX_LEN",
+        help="the same as --max-len (as serialsocket kermit spells it)",
+    )
+    ap.add_argument(
+        "--port",
+        dest="port_option",
+        type=SERIAL_PORT,
+        metavar="PORT",
+        help="the same as PORT (as serialsocket kermit spells it)",
+    )
 
 
 def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -148,6 +174,12 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     args, extra = ap.parse_known_args(argv)
     if extra:
         subs[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    if args.command in ("listen", "connect"):
+        if args.port is not None and args.port_option is not None:
+            subs[args.command].error("PORT given twice (as PORT and as --port)")
+        args.port = args.port if args.port is not None else args.port_option
+        if args.port is None:
+            subs[args.command].error("the following arguments are required: PORT")
     return args
 
 
