@@ -40,6 +40,21 @@ crc16_kermit: Callable[[bytes], int] = crcmod.predefined.mkCrcFun("kermit")
 """CRC-16/KERMIT of a byte string (crcmod's C implementation when available)."""
 
 
+def _raw_crc16() -> tuple[Callable[[bytes, int, bytes], int], bytes]:
+    """crcmod's function and table behind :func:`crc16_kermit`, to call
+    ``fun(data, 0, table)`` without its Python wrapper (once per packet on the
+    hot paths); the wrapper itself if crcmod is laid out differently."""
+    defaults = getattr(crc16_kermit, "__defaults__", None)
+    if defaults is not None and len(defaults) == 3:
+        init, table, fun = defaults
+        if callable(fun) and init == 0 and fun(b"123456789", 0, table) == 0x2189:
+            return fun, table
+    return (lambda data, crc, table: crc16_kermit(data)), b""
+
+
+_CRC16_FUN, _CRC16_TABLE = _raw_crc16()
+
+
 class BlockCheck(enum.IntEnum):
     """Block check types (Kermit manual section 6.2; CHKT field of the Send-Init)."""
 

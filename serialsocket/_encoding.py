@@ -286,38 +286,59 @@ class Encoding:
         tok = _token_table(self.qctl, self.qbin, self.rept)
         # Take enough source to fill every field: more than count x capacity
         # characters once encoded (compressible data needs a wider slice).
-        # Then only the last field can reach the end of the slice early.
-        span = capacity * count
+        # Then only the last field can reach the end of the slice early.  The
+        # first guess scales by the token widths of the first 256 bytes (plus
+        # 12 %): binary data needs about half the bytes that text does.
+        sample = bytes(view[:256]).translate(tok.width_table)
+        span = int(capacity * count * len(sample) * 1.12 / sum(sample)) + 64
         while True:
             arr = np.frombuffer(view[:span], dtype=np.uint8)
             units, counts = self._units(arr)
-            lens = tok.width.take(units).astype(np.int64)
-            if counts is not None:
+            if counts is None:
+                ends = np.cumsum(tok.width.take(units), dtype=np.int64)
+            else:
+                lens = tok.width.take(units).astype(np.int64)
                 lens += 2 * (counts >= _MIN_RUN)
-            ends = np.cumsum(lens)
+                ends = np.cumsum(lens)
             if ends[-1] > capacity * count or span >= len(view):
                 break
             span *= 4
-        flat, _ = self._emit(units, counts, None)
+        if counts is None:
+            flat = tok.packed.take(units).tobytes().translate(None, b"\0")
+        else:
+            flat, _ = self._emit(units, counts, None)
         # Each field ends at the last token that fits: a binary search per
         # field (a few dozen searches; a numpy call each would cost more).
         # (A memoryview of the int64 array: bisect reads it without converting
         # thousands of elements to Python ints first.)
         char_ends = ends.data
-        src_ends = None if counts is None else np.cumsum(counts).data
+        src_ends = char_ends if counts is None else np.cumsum(counts).data
         n_units = len(char_ends)
         fields: list[tuple[bytes, int]] = []
+        append = fields.append
+        bisect_right = bisect.bisect_right
         char_base = unit_base = src_base = 0
-        while len(fields) < count and unit_base < n_units:
-            cut = bisect.bisect_right(char_ends, char_base + capacity, unit_base)
-            if cut == n_units and len(fields) == count - 1 and len(view) > len(arr):
+        last = count - 1
+        more = len(view) > len(arr)
+        # A field holds at least capacity / 5 tokens (one is at most 5
+        # characters) and at most `capacity` (one is at least 1): search there.
+        fewest = capacity // MAX_TOKEN_LENGTH
+        while unit_base < n_units:
+            cut = bisect_right(
+                char_ends,
+                char_base + capacity,
+                min(unit_base + fewest, n_units),
+                min(unit_base + capacity, n_units),
+            )
+            if cut == n_units and len(fields) == last and more:
                 # The last field may want more source than the slice held.
-                field, used = self.encode_prefix(view[src_base:], capacity)
-                fields.append((field, used))
+                append(self.encode_prefix(view[src_base:], capacity))
                 return fields
             char_end = char_ends[cut - 1]
-            src_end = cut if src_ends is None else src_ends[cut - 1]
-            fields.append((flat[char_base:char_end], src_end - src_base))
+            src_end = cut if counts is None else src_ends[cut - 1]
+            append((flat[char_base:char_end], src_end - src_base))
+            if len(fields) == count:
+                return fields
             char_base, unit_base, src_base = char_end, cut, src_end
         if len(fields) < count and src_base < len(view):
             fields.extend(self.encode_fields(view[src_base:], capacity, count - len(fields)))
@@ -525,13 +546,15 @@ def _run_tokens(rept: int, token: bytes, n: int) -> bytes:
 class _TokenTable:
     """Every byte value's token, zero-padded and packed little-endian.
 
-    ``packed`` holds the token in its low bytes (uint16 when no token is
+    ``width_table`` is ``width`` as a ``translate`` table; ``packed`` holds
+    the token in its low bytes (uint16 when no token is
     longer than two characters, else uint32); ``packed64`` holds it in bytes
     2..4, leaving bytes 0..1 free for a repeat prefix and count; ``tokens``
     are the same as ``bytes``.
     """
 
     width: U8
+    width_table: bytes
     packed: npt.NDArray[np.uint16] | npt.NDArray[np.uint32]
     packed64: npt.NDArray[np.uint64]
     tokens: tuple[bytes, ...]
@@ -566,7 +589,7 @@ def _token_table(qctl: int, qbin: int | None, rept: int | None) -> _TokenTable:
     packed64 = words.astype(np.uint64) << np.uint64(16)
     for arr in (width, packed, packed64):
         arr.setflags(write=False)
-    return _TokenTable(width, packed, packed64, tokens)
+    return _TokenTable(width, width.tobytes(), packed, packed64, tokens)
 
 
 @functools.lru_cache(maxsize=16)

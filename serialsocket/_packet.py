@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ._checks import BlockCheck, check_chars, crc16_kermit
+from ._checks import _CRC16_FUN, _CRC16_TABLE, BlockCheck, check_chars
 from ._errors import LocalProtocolError
 from ._wire import (
     CR,
@@ -36,10 +36,11 @@ from ._wire import (
 __all__ = ["Packet", "build_packet", "data_capacity", "packet_length"]
 
 _KNOWN_TYPES = {t.value: t for t in PacketType}
-_CHECK_LENGTH = {c: int(c) for c in BlockCheck}
+_CRC16 = BlockCheck.CRC16
+"""(Enum member lookups cost a descriptor call each in Python 3.11.)"""
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
+@dataclass(frozen=True, slots=True, kw_only=True, init=False)
 class Packet:
     """One Kermit packet.
 
@@ -59,21 +60,24 @@ class Packet:
 
     seq: int
     type: str
-    data: bytes = b""
+    data: bytes
 
-    def __post_init__(self) -> None:
-        if not 0 <= self.seq < SEQ_MODULUS:
-            raise LocalProtocolError(f"sequence number {self.seq} is outside 0..63")
-        ptype = self.type
-        if ptype.__class__ is not PacketType:
-            if len(ptype) != 1 or not 33 <= ord(ptype) <= 126:
-                raise LocalProtocolError(f"packet type {ptype!r} is not one printable character")
-            if ptype in _KNOWN_TYPES:
-                _SET_TYPE(self, _KNOWN_TYPES[ptype])
-        if MARK in self.data:
+    # Written out (not generated) so that the checks and the three stores cost
+    # one call: a sender builds one Packet per data packet.
+    def __init__(self, *, seq: int, type: str, data: bytes = b"") -> None:
+        if not 0 <= seq < SEQ_MODULUS:
+            raise LocalProtocolError(f"sequence number {seq} is outside 0..63")
+        if type.__class__ is not PacketType:
+            if len(type) != 1 or not 33 <= ord(type) <= 126:
+                raise LocalProtocolError(f"packet type {type!r} is not one printable character")
+            type = _KNOWN_TYPES.get(type, type)
+        if MARK in data:
             raise LocalProtocolError(
                 "a data field must not contain the MARK (SOH): encode it first"
             )
+        _SET_SEQ(self, seq)
+        _SET_TYPE(self, type)
+        _SET_DATA(self, data)
 
 
 _new = object.__new__
@@ -152,31 +156,29 @@ def build_packet(
             can carry (9024 data+check characters).
     """
     data = packet.data
-    k = _CHECK_LENGTH[check]
+    k = 3 if check is _CRC16 else int(check)
     field = len(data) + k
+    seq_c, type_c = packet.seq + 32, ord(packet.type)
     if field + 2 <= MAX_NORMAL_LEN:
-        covered = bytes((field + 34, packet.seq + 32, ord(packet.type))) + data
+        covered = bytes((field + 34, seq_c, type_c)) + data
     elif field <= MAX_EXTENDED_FIELD:
-        seq_c, type_c, lenx1, lenx2 = (
-            packet.seq + 32,
-            ord(packet.type),
-            field // 95 + 32,
-            field % 95 + 32,
-        )
-        s = 32 + seq_c + type_c + lenx1 + lenx2
+        lenx1, lenx2 = divmod(field, 95)
+        s = 32 + seq_c + type_c + lenx1 + lenx2 + 64
         hcheck = ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32  # type 1 over LEN..LENX2
-        covered = bytes((32, seq_c, type_c, lenx1, lenx2, hcheck)) + data
+        covered = bytes((32, seq_c, type_c, lenx1 + 32, lenx2 + 32, hcheck)) + data
     else:
         raise LocalProtocolError(
             f"data field of {len(data)} characters exceeds the Kermit maximum packet"
         )
     if k == 3:
         # CRC-16 inline (as check_chars computes it): the common case, once per packet.
-        crc = crc16_kermit(covered)
+        crc = _CRC16_FUN(covered, 0, _CRC16_TABLE)
         c1, c2, c3 = (crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32
         tail = bytes((c1, c2, c3)) if eol is None else bytes((c1, c2, c3, eol))
     else:
         tail = check_chars(check, covered)
         if eol is not None:
             tail += bytes((eol,))
-    return b"".join((padding, b"\x01", covered, tail))
+    if padding:
+        return b"".join((padding, b"\x01", covered, tail))
+    return b"\x01" + covered + tail

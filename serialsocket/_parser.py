@@ -30,7 +30,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ._checks import BlockCheck, check_chars, crc16_kermit
+from ._checks import _CRC16_FUN, _CRC16_TABLE, BlockCheck, check_chars
 from ._errors import LocalProtocolError
 from ._packet import Packet, _slot_setter, _trusted_packet
 from ._wire import (
@@ -66,6 +66,9 @@ _SPECIAL_TYPES = frozenset(
     ord(t) for t in (PacketType.SEND_INIT, PacketType.INIT, PacketType.NAK, PacketType.ERROR)
 )
 """Type letters whose block check may differ from the one in force (``_checks_for``)."""
+
+_CRC16 = BlockCheck.CRC16
+"""(Enum member lookups cost a descriptor call each in Python 3.11.)"""
 
 _KNOWN = {ord(t.value): t for t in PacketType}
 _TYPES: tuple[str, ...] = tuple(_KNOWN.get(c, chr(c)) for c in range(256))
@@ -235,7 +238,7 @@ class PacketParser:
         buf = self._buf
         n = len(buf)
         pos = self._pos
-        if n - pos > 7 and self.check is BlockCheck.CRC16:
+        if n - pos > 7 and self.check is _CRC16:
             fast = self._next_fast(buf, n, pos)
             if fast is not None:
                 return fast
@@ -306,7 +309,7 @@ class PacketParser:
             or buf.find(MARK, pos + 1, end) >= 0
         ):
             return None
-        crc = crc16_kermit(buf[pos + 1 : end - 3])
+        crc = _CRC16_FUN(buf[pos + 1 : end - 3], 0, _CRC16_TABLE)
         if (
             buf[end - 3] != (crc >> 12) + 32
             or buf[end - 2] != (crc >> 6 & 0x3F) + 32
@@ -319,7 +322,7 @@ class PacketParser:
         return _received(
             _trusted_packet(seq_c - 32, _TYPES[type_c], buf[start : end - 3]),
             ln == 32,
-            BlockCheck.CRC16,
+            _CRC16,
             end - pos,
         )
 
@@ -394,9 +397,9 @@ class PacketParser:
         ptype = _TYPES[type_c]
         start = pos + (EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH)
         check = self.check
-        if check is BlockCheck.CRC16 and type_c not in _SPECIAL_TYPES and end - start >= 3:
+        if check is _CRC16 and type_c not in _SPECIAL_TYPES and end - start >= 3:
             # The common case, inline: a data or ACK packet under CRC-16.
-            crc = crc16_kermit(buf[pos + 1 : end - 3])
+            crc = _CRC16_FUN(buf[pos + 1 : end - 3], 0, _CRC16_TABLE)
             if (
                 buf[end - 3] == (crc >> 12) + 32
                 and buf[end - 2] == (crc >> 6 & 0x3F) + 32
