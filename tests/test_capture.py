@@ -31,7 +31,7 @@ from serialsocket.capture import (
     PcapngWriter,
     read_pcapng,
 )
-from serialsocket.packets import BlockCheck, PacketParser, PacketReceived
+from serialsocket.packets import BlockCheck, InitParameters, Packet, PacketParser, PacketReceived
 
 EPOCH = 1_764_000_000.0
 """A fixed wall-clock origin for the virtual-clock captures (2025-11-24 16:00 UTC)."""
@@ -214,17 +214,34 @@ def arq_capture(path: pathlib.Path) -> bytes:
     return payload
 
 
-def _payload(packets: tuple[CapturedPacket, ...], direction: Direction) -> bytes:
-    """The data bytes carried one way, decoded from the captured Kermit packets."""
+def _packets(packets: tuple[CapturedPacket, ...], direction: Direction) -> list[Packet]:
+    """The Kermit packets carried one way (every one must check good)."""
     parser = PacketParser(check=BlockCheck.CRC16, init_check=BlockCheck.CRC16)
     parser.receive_data(b"".join(p.data for p in packets if p.direction == direction))
-    encoding = EndpointConfig().encoding
-    out = b""
+    found = []
     while (event := parser.next_event()) is not None:
         assert isinstance(event, PacketReceived), event
-        if event.packet.type == "D":
-            out += encoding.decode(event.packet.data)
-    return out
+        found.append(event.packet)
+    return found
+
+
+def _payload(packets: tuple[CapturedPacket, ...], direction: Direction) -> bytes:
+    """The data bytes carried one way, decoded from the captured Kermit packets.
+
+    When both inits offer long sequence numbers (``long_window``), each data
+    field starts with the two characters of the high bits: skipped.
+    """
+    offers = [
+        getattr(InitParameters.decode(p.data), "long_window", None) is not None
+        for way in (Direction.OUTBOUND, Direction.INBOUND)
+        for p in _packets(packets, way)
+        if p.seq == 0 and (p.type == "I" or (p.type == "Y" and len(p.data) >= 12))
+    ]
+    head = 2 if len(offers) == 2 and all(offers) else 0
+    encoding = EndpointConfig().encoding
+    return b"".join(
+        encoding.decode(p.data[head:]) for p in _packets(packets, direction) if p.type == "D"
+    )
 
 
 def test_capturing_stream_records_both_directions(tmp_path: pathlib.Path) -> None:
@@ -235,23 +252,27 @@ def test_capturing_stream_records_both_directions(tmp_path: pathlib.Path) -> Non
     assert {p.direction for p in capture.packets} == {Direction.INBOUND, Direction.OUTBOUND}
     assert _payload(capture.packets, Direction.OUTBOUND) == payload
     assert _payload(capture.packets, Direction.INBOUND) == payload.upper()
-    # The init leaves at t = 0.  The acceptor answers once the init's 33
-    # characters (MARK..CHECK) have arrived, 0.25 s later, and its answer (34
-    # characters with the CR) comes back byte by byte, complete at 0.5 s plus
-    # 67 character times at 9600 bit/s.
+    # The init leaves at t = 0.  The acceptor answers once the init's
+    # characters (MARK..CHECK) have arrived, 0.25 s later, and its answer
+    # comes back byte by byte: complete (CR included) at 0.5 s plus both
+    # packets' character times at 9600 bit/s.
     first = capture.packets[0]
     assert (first.direction, first.data[3:4], first.timestamp) == (
         Direction.OUTBOUND,
         b"I",
         EPOCH,
     )
+    init_chars = first.data.index(b"\r")
     received = b""
     for packet in capture.packets:
         if packet.direction == Direction.INBOUND:
             received += packet.data
-            if len(received) == 34:
+            if b"\r" in received:
                 break
     assert received[3:4] == b"Y"
-    assert packet.timestamp - EPOCH == pytest.approx(0.5 + 67 * 10 / 9600, abs=1e-5)
+    answer_chars = len(received)
+    assert packet.timestamp - EPOCH == pytest.approx(
+        0.5 + (init_chars + answer_chars) * 10 / 9600, abs=1e-5
+    )
     stamps = [p.timestamp for p in capture.packets]
     assert stamps == sorted(stamps)

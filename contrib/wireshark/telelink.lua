@@ -110,6 +110,7 @@ local f = {
     hcheck_good = ProtoField.bool("telelink.hcheck.good", "Header check good"),
     length = ProtoField.uint16("telelink.length", "Packet length (MARK..CHECK)"),
     seq = ProtoField.uint8("telelink.seq", "SEQ"),
+    seq_long = ProtoField.uint32("telelink.seq.long", "Sequence number (18-bit, long sequence numbers)"),
     type = ProtoField.string("telelink.type", "TYPE"),
     type_name = ProtoField.string("telelink.type.name", "Type name"),
     data = ProtoField.bytes("telelink.data", "DATA (as sent)"),
@@ -123,8 +124,8 @@ local f = {
     check_value = ProtoField.uint16("telelink.check.value", "CRC-16/KERMIT", base.HEX),
     check_good = ProtoField.bool("telelink.check.good", "Check good"),
     eol = ProtoField.uint8("telelink.eol", "EOL", base.HEX),
-    ack_next = ProtoField.uint8("telelink.ack.next", "Next expected (cumulative)"),
-    ack_window = ProtoField.uint8("telelink.ack.window", "Advertised window"),
+    ack_next = ProtoField.uint32("telelink.ack.next", "Next expected (cumulative)"),
+    ack_window = ProtoField.uint32("telelink.ack.window", "Advertised window"),
     ack_poll = ProtoField.bool("telelink.ack.poll", "Poll (answer at once)"),
     reason = ProtoField.string("telelink.reason", "Reason"),
     init = ProtoField.bytes("telelink.init", "Init parameters"),
@@ -142,6 +143,8 @@ local f = {
     init_sysid = ProtoField.string("telelink.init.sysid", "SYSID"),
     init_version = ProtoField.uint8("telelink.init.version", "telelink protocol version"),
     init_timeout = ProtoField.uint32("telelink.init.timeout_ms", "Initial timeout hint (ms)"),
+    init_xcapas = ProtoField.uint8("telelink.init.xcapas", "XCAPAS (telelink capabilities)", base.HEX),
+    init_long_window = ProtoField.uint32("telelink.init.long_window", "XWINDO (window with long sequence numbers)"),
 }
 tl.fields = {}
 for _, field in pairs(f) do table.insert(tl.fields, field) end
@@ -281,18 +284,19 @@ function arq.restart(interface)
     arq.streams["serial line:" .. interface .. ":2"] = nil
 end
 
-function arq.data(key, seq, data, frame)
+function arq.data(key, seq, data, frame, modulus)
     local s = arq.streams[key]
     if s == nil then
         s = { expected = 1, held = {}, buffer = "", mode = nil }
         arq.streams[key] = s
     end
-    if (seq - s.expected) % 64 >= ARQ_AHEAD or s.held[seq] ~= nil then return end
+    local ahead = modulus == 64 and ARQ_AHEAD or modulus / 2
+    if (seq - s.expected) % modulus >= ahead or s.held[seq] ~= nil then return end
     s.held[seq] = data
     while s.held[s.expected] ~= nil do
         s.buffer = s.buffer .. s.held[s.expected]
         s.held[s.expected] = nil
-        s.expected = (s.expected + 1) % 64
+        s.expected = (s.expected + 1) % modulus
     end
     if s.mode == nil and #s.buffer >= 3 then
         s.mode = s.buffer:sub(1, 3) == "TL\1" and "tcpstream" or "bytes"
@@ -306,6 +310,23 @@ function arq.data(key, seq, data, frame)
     elseif s.mode == "bytes" then
         s.buffer = "" -- not a command session: nothing more to decode
     end
+end
+
+-- n characters of 6 bits each (tochar), most significant first, from bytes[at].
+local function base64_number(bytes, at, n)
+    local v = 0
+    for k = 0, n - 1 do v = v * 64 + unchar(bytes[at + k]) end
+    return v
+end
+
+-- Long sequence numbers (18 bits), per interface: offered in the I, agreed
+-- when the init's answer offers them too.  First pass: `active` follows the
+-- capture; `at` remembers, per packet, what was in force for later passes.
+local longseq = { offer = {}, active = {}, at = {} }
+local LONG_MODULUS = 64 * 64 * 64
+
+function longseq.reset()
+    longseq.offer, longseq.active, longseq.at = {}, {}, {}
 end
 
 local function add_init(tree, buf, dstart, dlen, bytes)
@@ -344,9 +365,21 @@ local function add_init(tree, buf, dstart, dlen, bytes)
                     for k = 2, 4 do ms = ms * 95 + unchar(bytes[dstart + after + k]) end
                     t:add(f.init_timeout, buf:range(dstart + after + 1, 3), ms)
                 end
+                -- XCAPAS (bit 0: long sequence numbers), then XWINDO as three
+                -- 6-bit characters (serialsocket/PROTOCOL.md section 9).
+                if after + 5 <= dlen then
+                    local xcapas = unchar(bytes[dstart + after + 5])
+                    t:add(f.init_xcapas, buf:range(dstart + after + 4, 1), xcapas)
+                    if band(xcapas, 1) == 1 and after + 8 <= dlen then
+                        t:add(f.init_long_window, buf:range(dstart + after + 5, 3),
+                            base64_number(bytes, dstart + after + 6, 3))
+                        return true
+                    end
+                end
             end
         end
     end
+    return false
 end
 
 -- One packet at buf[pos .. pos+total-1] (0-based), eol included when present.
@@ -394,26 +427,56 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
     end
     local dstart, dlen = pos + header, total - header - kind
     if dlen < 0 then dlen = 0 end
+    local iface = frame_interface()
+    iface = tostring(iface and iface.value or 0)
+    local where = pinfo.number .. ":" .. pos
+    local long
+    if pinfo.visited then
+        long = longseq.at[where] or false
+    else
+        long = longseq.active[iface] or false
+        longseq.at[where] = long
+    end
+    local init = (type_char == "I" or type_char == "S" or (type_char == "Y" and seq == 0 and dlen >= 12))
+        and dlen > 0
+    -- Long sequence numbers: the data field starts with the 12 high bits.
+    local full, width, modulus = seq, 1, 64
+    if long and not init and dlen >= 2
+        and (type_char == "D" or type_char == "Z" or type_char == "N" or type_char == "Y") then
+        full = base64_number(bytes, dstart + 1, 2) * 64 + seq
+        t:add(f.seq_long, buf:range(dstart, 2), full)
+        dstart, dlen = dstart + 2, dlen - 2
+        width, modulus = 3, LONG_MODULUS
+    end
+    local is_ack = type_char == "Y" and not init and (dlen == 2 * width or dlen == 2 * width + 1)
     -- The type's meaning (ARQ, serialsocket/PROTOCOL.md section 2).
-    local words = type_char .. " " .. seq
-    if type_char == "Y" and seq == 0 and dlen >= 9 then
+    local words = type_char .. " " .. full
+    if init and type_char == "Y" then
         name = "ACK of init (connection accepted; the acceptor's parameters)"
-    elseif type_char == "Y" and dlen >= 2 and dlen <= 3 then
+    elseif is_ack then
         name = "ACK"
-        words = words .. " next=" .. unchar(bytes[dstart + 1]) .. " win=" .. unchar(bytes[dstart + 2])
+        words = words .. " next=" .. base64_number(bytes, dstart + 1, width)
+            .. " win=" .. base64_number(bytes, dstart + 1 + width, width)
     end
     t:add(f.type_name, buf:range(pos + 3, 1), name)
     if dlen > 0 then
         t:add(f.data, buf:range(dstart, dlen))
         t:add(f.data_len, buf:range(dstart, dlen), dlen)
     end
-    if (type_char == "I" or type_char == "S" or (type_char == "Y" and seq == 0 and dlen >= 9))
-        and dlen > 0 then
-        add_init(t, buf, dstart, dlen, bytes)
-    elseif type_char == "Y" and dlen >= 2 and dlen <= 3 then
-        t:add(f.ack_next, buf:range(dstart, 1), unchar(bytes[dstart + 1]))
-        t:add(f.ack_window, buf:range(dstart + 1, 1), unchar(bytes[dstart + 2]))
-        t:add(f.ack_poll, buf:range(dstart, dlen), dlen == 3 and bytes[dstart + 3] == 80)
+    if init then
+        local offered = add_init(t, buf, dstart, dlen, bytes)
+        if good and not pinfo.visited then
+            if type_char == "I" then
+                longseq.offer[iface], longseq.active[iface] = offered, false
+            elseif type_char == "Y" then
+                longseq.active[iface] = (longseq.offer[iface] or false) and offered
+            end
+        end
+    elseif is_ack then
+        t:add(f.ack_next, buf:range(dstart, width), base64_number(bytes, dstart + 1, width))
+        t:add(f.ack_window, buf:range(dstart + width, width),
+            base64_number(bytes, dstart + 1 + width, width))
+        t:add(f.ack_poll, buf:range(dstart, dlen), dlen == 2 * width + 1 and bytes[dstart + dlen] == 80)
     elseif dlen > 0 and (type_char == "D" or type_char == "E" or type_char == "F"
         or type_char == "X") then
         local decoded = kermit_decode(bytes, dstart + 1, dstart + dlen)
@@ -430,7 +493,7 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
                 t:add(f.decoded_text, buf:range(dstart, dlen), printable(decoded:sub(1, 80)))
                 words = words .. " " .. #decoded .. "B"
                 if type_char == "D" and good and not pinfo.visited then
-                    arq.data(serial_carry.key(), seq, decoded, pinfo.number)
+                    arq.data(serial_carry.key(), full, decoded, pinfo.number, modulus)
                 end
             end
         end
@@ -448,7 +511,7 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
         arq.restart(tostring(i and i.value or 0))
     end
     if has_eol then t:add(f.eol, buf:range(pos + total, 1)) end
-    t:set_text(string.format("Kermit %s seq=%d len=%d: %s", type_char, seq, total, name))
+    t:set_text(string.format("Kermit %s seq=%d len=%d: %s", type_char, full, total, name))
     table.insert(summary, words)
 end
 
@@ -702,6 +765,7 @@ end
 function tl.init()
     serial_carry.reset()
     arq.reset()
+    longseq.reset()
     stream_carry_cmd.reset()
 end
 
