@@ -9,9 +9,15 @@ between data and packet sizes.  Lengths count MARK through CHECK:
 :data:`DEFAULT_MAX_PACKET_LENGTH`.
 
 Block checks: :class:`BlockCheck` (types 1, 2 and 3), :func:`check_chars`,
-:func:`crc16_kermit` (CRC-16/KERMIT).  Prefix encoding: :class:`Encoding`,
-with the profiles :data:`PRINTABLE` (the default: printable output) and
-:data:`EIGHT_BIT_CLEAN` (no 8th-bit prefixing).
+:func:`crc16_kermit` (CRC-16/KERMIT); :func:`crc32_ieee` and
+:func:`crc32_chars` (CRC-32, not negotiated yet).  Prefix encoding:
+:class:`Encoding`, with the profiles :data:`PRINTABLE` (the default: printable
+output) and :data:`EIGHT_BIT_CLEAN` (no 8th-bit prefixing).
+
+Dense encodings for telelink-to-telelink links (serialsocket/DENSE.md; not
+negotiated yet): :class:`EscapeEncoding` (8-bit lines: escape only MARK, the
+escape byte and declared unsafe bytes such as :data:`XON_XOFF`) and
+:class:`Radix91Encoding` (printable lines: 16 characters per 13 bytes).
 
 Parsing: :class:`PacketParser` takes any bytes, line noise included, and
 yields :data:`ParserEvent` s, :class:`PacketReceived` or
@@ -26,6 +32,11 @@ by :class:`serialsocket.Connected`), :data:`PROTOCOL_VERSION`.
 from ._checks import BlockCheck as BlockCheck
 from ._checks import check_chars as check_chars
 from ._checks import crc16_kermit as crc16_kermit
+from ._checks import crc32_chars as crc32_chars
+from ._checks import crc32_ieee as crc32_ieee
+from ._dense import XON_XOFF as XON_XOFF
+from ._dense import EscapeEncoding as EscapeEncoding
+from ._dense import Radix91Encoding as Radix91Encoding
 from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
 from ._encoding import PRINTABLE as PRINTABLE
 from ._encoding import Encoding as Encoding
@@ -54,8 +65,10 @@ __all__ = [
     "MIN_PACKET_LENGTH",
     "PRINTABLE",
     "PROTOCOL_VERSION",
+    "XON_XOFF",
     "BlockCheck",
     "Encoding",
+    "EscapeEncoding",
     "InitParameters",
     "Negotiated",
     "Packet",
@@ -65,10 +78,13 @@ __all__ = [
     "PacketType",
     "ParserEvent",
     "ParserStatistics",
+    "Radix91Encoding",
     "RejectReason",
     "build_packet",
     "check_chars",
     "crc16_kermit",
+    "crc32_chars",
+    "crc32_ieee",
     "data_capacity",
     "packet_length",
 ]
