@@ -26,8 +26,10 @@ LINKSIM_MAY_IMPORT: dict[str, set[str]] = {
     "control": {"arm"},
     "bench": {"link", "arm"},
     "demo": {"link", "arm", "control"},
+    # Seed 004's teleoperation: the arm's model, the line, the control station.
+    "teleop": {"link", "arm", "control"},
     # The command line is the one place that may import everything.
-    "cli": {"link", "arm", "control", "bench", "demo"},
+    "cli": {"link", "arm", "control", "bench", "demo", "teleop"},
 }
 """For each linksim sub-package, the sibling sub-packages it may import.  Top-level
 private modules (``linksim._errors``, ``linksim._plotting``) are shared by all."""

@@ -1,5 +1,5 @@
 """The ``linksim`` command: ``demo``, ``arm-server``, ``control``, ``console``, ``plot``,
-``relay``, ``bench`` and ``soak``."""
+``relay``, ``bench``, ``soak`` and ``teleop``."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from serialsocket.argtypes import parse_args
 from serialsocket.capture import CaptureFile
 from tcpstream import write_key_file
 
-from . import _armserver, _bench, _console, _demo, _proxy, _soak
+from . import _armserver, _bench, _console, _demo, _proxy, _soak, _teleop
 from ._args import SECONDS, SECONDS_OR_ZERO, SERIAL_PORT, write_template
 from ._link import add_link_arguments, config_from_args
 
@@ -282,6 +282,15 @@ def build_parser() -> argparse.ArgumentParser:
     soak = sub.add_parser("soak", help=soak_help, description=f"The soak: {soak_help}.")
     _soak.add_soak_arguments(soak)
     soak.set_defaults(func=_soak.soak_main)
+    teleop = sub.add_parser(
+        "teleop",
+        help="seed 004's streaming teleoperation: hand controller, line, arm, contact force",
+        description="A scripted operator streams FRHC samples through the teleoperation "
+        "channel to the simulated arm in joint, cartesian, rate or index mode, on a table "
+        "(surface) or at a hole (peg), with direct force reflection or shared compliance.",
+    )
+    _teleop.add_teleop_arguments(teleop)
+    teleop.set_defaults(func=_teleop.teleop_main)
     return ap
 
 

@@ -1,0 +1,398 @@
+"""``linksim teleop``: the operator, the line and the remote arm in one run.
+
+The operator's loop samples the FRHC at 104 Hz (seed 004's closed loop) and
+submits every sample to the teleoperation channel; the arm's loop runs at
+125 Hz, applies the newest sample that arrived and answers.  The channel
+runs over the same transports as ``linksim demo``: a serial socket on the
+impaired line (its pacing from the socket's own figures), or TCP (the line's
+delay; TCP repairs the rest), on a virtual clock; or real TCP over loopback
+on the wall clock (the latency benchmark).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import random
+from collections.abc import AsyncIterator, Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import trio
+
+from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
+from linksim.link import DirectionConfig, LinkConfig, open_impaired_link, serial_socket_pair
+from serialsocket import SerialSocket
+from tcpstream.teleop import Backlog, TeleopArm, TeleopMode, TeleopRefused, open_teleop
+
+from ._contact import ContactModel, Hole
+from ._operator import Operator, Script, peg_script, surface_script
+from ._remote import RemoteArm, RemoteConfig, rate_deadman
+
+__all__ = ["TeleopOptions", "TeleopReport", "run_teleop", "run_teleop_loopback"]
+
+IDENTITY = "teleop-operator"
+SAMPLE_RATE = 104.0
+"""Hz: seed 004's closed loop ("approximately 104 Hz")."""
+CONTROL_RATE = 125.0
+"""Hz: the arm's control loop (seed 000's sample rate)."""
+TABLE_DROP = 0.10
+"""The table is this far below the hand's start (m)."""
+
+
+@dataclass(frozen=True, slots=True)
+class TeleopOptions:
+    mode: TeleopMode = TeleopMode.CARTESIAN
+    task: str = "surface"
+    scheme: str = "shared-compliance"
+    """"shared-compliance" or "force-reflection"."""
+    transport: str = "serial"
+    """"serial" or "tcp" (virtual), "loopback" (real TCP, wall clock)."""
+    preset: str = "noisy-moon"
+    seed: int = 1
+    key: bytes | None = None
+    stop_at: float | None = None
+    """Script seconds at which the operator presses the emergency stop."""
+    force_stop: bool = True
+    duration: float | None = None
+    """Script seconds to run (default: the script, then the line's round trip and 1 s)."""
+    timeout: float = 600.0
+
+
+@dataclass
+class TeleopReport:
+    ok: bool
+    mode: str
+    task: str
+    scheme: str
+    transport: str
+    preset: str
+    one_way_delay_s: float
+    samples_sampled: int
+    samples_sent: int
+    samples_coalesced: int
+    samples_received: int
+    samples_superseded: int
+    samples_applied: int
+    setpoint_age_s: dict[str, float]
+    max_contact_force_n: float
+    force_limit_n: float
+    compliance_force_n: float
+    force_limit_stops: int
+    emergency_stops: int
+    samples_after_stop: int
+    bounces: int
+    pose_changes: int
+    deadman_trips: int
+    rate_deadman_s: float
+    replies_received: int
+    stop_to_arm_s: float | None
+    seconds: float
+    error: str | None = None
+    force_trace: list[tuple[float, float]] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data.pop("force_trace")
+        return data
+
+
+def script_for(task: str, mode: TeleopMode) -> Script:
+    if task == "surface":
+        return surface_script(mode, drop=TABLE_DROP)
+    if task == "peg":
+        return peg_script(mode, hole=(0.05, 0.0), above=0.08)
+    raise ValueError(f"task must be surface or peg, got {task!r}")
+
+
+def world_for(task: str) -> tuple[ContactModel, np.ndarray[Any, np.dtype[np.float64]]]:
+    """The contact world around the hand's start pose, and that pose's joints."""
+    q0 = np.array(DEFAULT_WORLD.initial_joints, dtype=np.float64)
+    p0 = hand_frame(PUMA560, q0)[:3, 3]
+    table = float(p0[2]) - TABLE_DROP
+    if task == "peg":
+        top = float(p0[2]) - 0.08
+        hole = Hole(centre=(float(p0[0]) + 0.05, float(p0[1])), top=top)
+        return ContactModel(table_z=top - 0.06, hole=hole), q0
+    return ContactModel(table_z=table), q0
+
+
+def _percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(np.array(values), q)) if values else math.nan
+
+
+class _SerialFigures:
+    """The serial socket's own figures, as a :class:`Backlog` for the channel's pacing.
+
+    ``bytes_queued`` is what the socket holds unsent.  Its ``line_backlog`` is
+    as of the endpoint's last event and goes stale while the link is idle, so
+    the line's queue is followed from the socket's ``port_bytes_out`` instead:
+    every byte written to the port takes one character time of the line, and
+    the line drains at its rate.  ``slack`` (one sample's line time) is
+    forgiven: a sample handed over then waits behind nothing of ours, and at
+    most one sample is ever in the line's queue.
+    """
+
+    def __init__(self, sock: SerialSocket, char_time: float, slack: float) -> None:
+        self._sock = sock
+        self._char_time = char_time
+        self._slack = slack
+        self._out = 0
+        self._line = 0.0
+        self._at = trio.current_time()
+
+    def __call__(self) -> Backlog:
+        st = self._sock.statistics()
+        now = trio.current_time()
+        self._line = max(0.0, self._line - (now - self._at))
+        self._line += (st.port_bytes_out - self._out) * self._char_time
+        self._out, self._at = st.port_bytes_out, now
+        return Backlog(st.link.bytes_queued, max(0.0, self._line - self._slack))
+
+
+@contextlib.asynccontextmanager
+async def _streams(
+    options: TeleopOptions, link: LinkConfig
+) -> AsyncIterator[
+    tuple[
+        trio.abc.Stream, trio.abc.Stream, Callable[[], Backlog] | None, Callable[[], Backlog] | None
+    ]
+]:
+    if options.transport == "serial":
+        async with serial_socket_pair(link) as (ctl, arm):
+            slack, char = _line_interval(link), link.a_to_b.char_time
+            yield ctl, arm, _SerialFigures(ctl, char, 0.0), _SerialFigures(arm, char, slack)
+        return
+    d = link.a_to_b
+    line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
+    async with open_impaired_link(line) as (ctl_end, arm_end):
+        yield ctl_end, arm_end, None, None
+
+
+def _line_interval(link: LinkConfig) -> float:
+    """Seconds one sample takes on the line (prefix-encoded), or one sampling interval."""
+    d = link.a_to_b
+    if d.rate is None:
+        return 1.0 / SAMPLE_RATE
+    return max(1.0 / SAMPLE_RATE, (56 * 1.6 + 20) * d.bits_per_char / d.rate)
+
+
+async def run_teleop(options: TeleopOptions) -> TeleopReport:
+    """One run on whatever clock trio has (virtual under ``run_virtual``)."""
+    link = LinkConfig.preset(options.preset, seed=options.seed)
+    one_way = link.a_to_b.delay + link.a_to_b.jitter
+    script = script_for(options.task, options.mode)
+    duration = options.duration or script.duration + 2 * one_way + 1.0
+    contact, q0 = world_for(options.task)
+    deadman = rate_deadman(one_way, _line_interval(link))
+    remote = RemoteArm(
+        RemoteConfig(
+            control_rate=CONTROL_RATE, rate_deadman=deadman, force_stop=options.force_stop
+        ),
+        contact,
+        q0,
+    )
+    operator = Operator(
+        script,
+        options.mode,
+        force_reflection=options.scheme == "force-reflection",
+        shared_compliance=options.scheme == "shared-compliance",
+    )
+    rng = random.Random(options.seed)
+    stop_sent: float | None = None
+    stop_arrived: list[float] = []
+
+    def on_stop() -> None:
+        stop_arrived.append(trio.current_time())
+        remote.emergency_stop()
+
+    arm_end = TeleopArm(
+        key=options.key,
+        rate_deadman=deadman,
+        control_rate=CONTROL_RATE,
+        on_stop=on_stop,
+        nonce_source=rng.randbytes,
+    )
+    error: str | None = None
+    op_stats = None
+    start = trio.current_time()
+    with trio.move_on_after(options.timeout) as scope:
+        async with (
+            _streams(options, link) as (ctl, arm_stream, ctl_backlog, arm_backlog),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(lambda: arm_end.serve_stream(arm_stream, backlog=arm_backlog))
+            nursery.start_soon(_arm_loop, arm_end, remote)
+            try:
+                async with open_teleop(
+                    ctl,
+                    identity=IDENTITY,
+                    key=options.key,
+                    backlog=ctl_backlog,
+                    on_reply=operator.on_reply,
+                    nonce_source=rng.randbytes,
+                ) as op:
+                    t0 = trio.current_time()
+                    dt = 1.0 / SAMPLE_RATE
+                    k = 0
+                    while k * dt <= duration:
+                        await trio.sleep_until(t0 + k * dt)
+                        now = trio.current_time()
+                        stop = options.stop_at
+                        if stop is not None and stop_sent is None and now - t0 >= stop:
+                            stop_sent = now
+                            op.emergency_stop()
+                        if stop_sent is None:
+                            op.submit(operator.sample(now - t0, dt, stamp=now))
+                        k += 1
+                    op_stats = op.statistics()
+            except TeleopRefused as exc:
+                error = str(exc)
+            nursery.cancel_scope.cancel()
+    if scope.cancelled_caught:
+        error = f"the run did not finish within {options.timeout:g} s"
+    return _report(
+        options,
+        remote,
+        operator,
+        op_stats,
+        arm_end,
+        one_way,
+        deadman,
+        start,
+        error,
+        None if stop_sent is None or not stop_arrived else stop_arrived[0] - stop_sent,
+    )
+
+
+async def _arm_loop(arm_end: TeleopArm, remote: RemoteArm) -> None:
+    dt = 1.0 / remote.config.control_rate
+    t0 = trio.current_time()
+    k = 1
+    while True:
+        await trio.sleep_until(t0 + k * dt)
+        k += 1
+        latest = arm_end.latest()
+        reply = remote.step(trio.current_time(), latest)
+        if arm_end.connected:
+            arm_end.reply(reply)
+
+
+def _report(
+    options: TeleopOptions,
+    remote: RemoteArm,
+    operator: Operator,
+    op_stats: Any,
+    arm_end: TeleopArm,
+    one_way: float,
+    deadman: float,
+    start: float,
+    error: str | None,
+    stop_to_arm: float | None,
+) -> TeleopReport:
+    st = remote.stats
+    ages = st.ages
+    sent = op_stats.samples_sent if op_stats is not None else 0
+    coalesced = op_stats.samples_coalesced if op_stats is not None else 0
+    replies = op_stats.replies_received if op_stats is not None else 0
+    limit = remote.config.force_limit
+    arm_st = arm_end.statistics()
+    ok = error is None and st.samples_applied > 0
+    if options.scheme == "shared-compliance":
+        ok = ok and st.max_force <= limit
+    if options.stop_at is not None:
+        ok = ok and st.emergency_stops == 1 and st.samples_after_stop == 0
+    return TeleopReport(
+        ok=ok,
+        mode=options.mode.name.lower(),
+        task=options.task,
+        scheme=options.scheme,
+        transport=options.transport,
+        preset=options.preset,
+        one_way_delay_s=one_way,
+        samples_sampled=operator.sampled,
+        samples_sent=sent,
+        samples_coalesced=coalesced,
+        samples_received=arm_st.samples_received if arm_st is not None else 0,
+        samples_superseded=arm_st.samples_superseded if arm_st is not None else 0,
+        samples_applied=st.samples_applied,
+        setpoint_age_s={
+            "p50": _percentile(ages, 50),
+            "p99": _percentile(ages, 99),
+            "max": max(ages) if ages else math.nan,
+        },
+        max_contact_force_n=st.max_force,
+        force_limit_n=limit,
+        compliance_force_n=remote.config.compliance_force,
+        force_limit_stops=st.force_limit_stops,
+        emergency_stops=st.emergency_stops,
+        samples_after_stop=st.samples_after_stop,
+        bounces=st.bounces,
+        pose_changes=st.pose_changes,
+        deadman_trips=st.deadman_trips,
+        rate_deadman_s=deadman,
+        replies_received=replies,
+        stop_to_arm_s=stop_to_arm,
+        seconds=trio.current_time() - start,
+        error=error,
+        force_trace=st.force_trace,
+    )
+
+
+async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> dict[str, Any]:
+    """The latency benchmark: real TCP over loopback, wall clock, 104 Hz for ``seconds``.
+
+    Every sample carries its sampling time; the arm notes when its control
+    loop applies it.  Returns sample counts and the sampling-to-execution
+    latency (p50, p99, max).
+    """
+    applied: list[float] = []
+    numbers: list[int] = []
+    arm_end = TeleopArm(key=key, rate_deadman=0.1, control_rate=1000.0)
+    async with trio.open_nursery() as nursery:
+        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+        port = listeners[0].socket.getsockname()[1]
+
+        async def serve(stream: trio.SocketStream) -> None:
+            await arm_end.serve_stream(stream)
+
+        nursery.start_soon(trio.serve_listeners, serve, listeners)
+
+        async def arm_loop() -> None:
+            # The arm applies a sample as soon as it arrives (its loop wakes at 1 kHz).
+            while True:
+                await trio.sleep(0.001)
+                got = arm_end.latest()
+                if got is not None:
+                    applied.append(trio.current_time() - got[0].stamp)
+                    numbers.append(got[0].sample)
+
+        nursery.start_soon(arm_loop)
+        stream = await trio.open_tcp_stream("127.0.0.1", port)
+        operator = Operator(script_for("surface", TeleopMode.CARTESIAN), TeleopMode.CARTESIAN)
+        async with stream, open_teleop(stream, identity=IDENTITY, key=key) as op:
+            t0 = trio.current_time()
+            dt = 1.0 / SAMPLE_RATE
+            n = int(seconds * SAMPLE_RATE)
+            for k in range(n):
+                await trio.sleep_until(t0 + k * dt)
+                now = trio.current_time()
+                op.submit(operator.sample((now - t0) % 13.0, dt, stamp=now))
+            await trio.sleep(0.1)
+            stats = op.statistics()
+        nursery.cancel_scope.cancel()
+    return {
+        "seconds": seconds,
+        "sample_rate_hz": SAMPLE_RATE,
+        "samples_sampled": operator.sampled,
+        "samples_sent": stats.samples_sent,
+        "samples_coalesced": stats.samples_coalesced,
+        "samples_applied": len(numbers),
+        "every_sample_applied": numbers == list(range(1, operator.sampled + 1)),
+        "latency_s": {
+            "p50": _percentile(applied, 50),
+            "p99": _percentile(applied, 99),
+            "max": max(applied) if applied else math.nan,
+        },
+    }
