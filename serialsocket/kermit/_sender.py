@@ -161,8 +161,8 @@ class KermitSender(KermitSide):
         neg = self._neg
         assert neg is not None
         top = neg.send_max_length
-        if not self.config.dynamic_length or top <= _MIN_DYNAMIC_LENGTH:
-            return top
+        if not self.config.dynamic_length or top <= _MIN_DYNAMIC_LENGTH or neg.streaming:
+            return top  # streaming: the transport below repairs, nothing is lost
         p = (self._d_errors + _PRIOR_ERRORS) / (self._d_chars + _PRIOR_CHARS)
         cps = 1.0 / line_time(1, self.config.rate)
         rtt = max(2 * self.config.delay, self._min_rtt or 0.0)
