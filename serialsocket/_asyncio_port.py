@@ -48,6 +48,10 @@ _THREAD_QUEUE = 16
 """Chunks the reader thread of a URL port may hold before it stops reading
 (back-pressure): 16 x 64 KB bounds the memory of a port whose reader is slow."""
 
+_THREAD_BURST = 4096
+"""Bytes the reader thread of a URL port gathers before it hands them to the
+loop: a few packets, so a steady stream is delivered as it comes."""
+
 _THREAD_JOIN = 1.0 + THREAD_READ_TIMEOUT
 """Seconds closing a URL port waits for its reader thread (it notices the stop
 flag within one read timeout)."""
@@ -266,7 +270,6 @@ class _ThreadTransport:
         self._chunks: queue.Queue[bytes | OSError] = queue.Queue(_THREAD_QUEUE)
         self._arrived = asyncio.Event()
         self._pending = b""
-        self._ended = False
         self._thread = threading.Thread(
             target=self._read_loop, name=f"serialsocket-asyncio-port-{ser.port}", daemon=True
         )
@@ -292,11 +295,13 @@ class _ThreadTransport:
                 return
 
     def _read_available(self) -> bytes:
-        """One byte with the timeout, then everything else already there (see
-        the trio port: ``in_waiting`` is only a lower bound for ``socket://``)."""
+        """One byte with the timeout, then what else is already there, up to
+        :data:`_THREAD_BURST` bytes (``in_waiting`` is only a lower bound for
+        ``socket://``, which then reads byte by byte: without the bound a
+        steady stream would be held back until it paused, ACKs with it)."""
         data = bytearray(self._ser.read(1))
-        while data and len(data) < READ_SIZE:
-            more = min(self._ser.in_waiting, READ_SIZE - len(data))
+        while data and len(data) < _THREAD_BURST:
+            more = min(self._ser.in_waiting, _THREAD_BURST - len(data))
             if more <= 0:
                 break
             chunk = self._ser.read(more)
@@ -307,6 +312,8 @@ class _ThreadTransport:
 
     async def read(self, max_bytes: int) -> bytes:
         while not self._pending:
+            if self._stop.is_set():
+                raise OSError(errno.EBADF, "the port was closed")
             try:
                 item = self._chunks.get_nowait()
             except queue.Empty:
@@ -332,6 +339,7 @@ class _ThreadTransport:
 
     async def aclose(self) -> None:
         self._stop.set()
+        self._arrived.set()  # a waiting read wakes and sees the port closed
         loop = asyncio.get_running_loop()
         # Bounded: the thread notices the flag within one read timeout.
         await loop.run_in_executor(None, self._thread.join, _THREAD_JOIN)

@@ -59,6 +59,7 @@ class _SocketTransport(asyncio.Transport):
         self._write_paused = False
         self._resumer: asyncio.Task[None] | None = None
         self._closing = False
+        self._closed = asyncio.Event()  # close() or abort() was called
         protocol.connection_made(self)
         self._pump = asyncio.create_task(self._read_loop(), name="serialsocket-transport")
 
@@ -70,13 +71,18 @@ class _SocketTransport(asyncio.Transport):
                 data = await self._sock.read(READ_SIZE)
                 if not data:
                     self._protocol.eof_received()
+                    # Half-closed by the peer: writing goes on until close() or abort().
+                    await self._closed.wait()
                     break
                 self._protocol.data_received(data)
                 self._check_write_pressure()
-        except (ConnectionError, RuntimeError) as error:
-            exc = error if isinstance(error, ConnectionError) else None
-        if self._sock.is_closing():
-            await self._sock.wait_closed()
+        except ConnectionError as error:
+            exc = error
+            if not self._sock.is_closing():
+                self._sock.abort("the link failed")  # stops the driver, closes the port
+        except RuntimeError:
+            pass  # closed by close() or abort()
+        await self._sock.wait_closed()
         self._protocol.connection_lost(exc)
 
     def _check_write_pressure(self) -> None:
@@ -119,8 +125,12 @@ class _SocketTransport(asyncio.Transport):
 
     def close(self) -> None:
         self._closing = True
+        self._closed.set()
+        self._resume.set()  # a paused pump wakes and sees the socket closed
         self._sock.close()
 
     def abort(self) -> None:
         self._closing = True
+        self._closed.set()
+        self._resume.set()
         self._sock.abort()

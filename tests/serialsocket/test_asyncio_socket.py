@@ -469,3 +469,71 @@ print("trio modules:", sorted(loaded))
     )
     assert done.returncode == 0, done.stderr
     assert "trio modules: []" in done.stdout
+
+
+def test_two_sockets_over_pyserial_socket_urls() -> None:
+    """The URL port (a reader thread, executor writes) under a whole exchange: two
+    ``socket://`` ports joined by a TCP null modem, as ser2net would join two lines."""
+
+    async def main() -> None:
+        joined: list[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = []
+        both = asyncio.Event()
+
+        async def pipe(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
+            while data := await src.read(65536):
+                dst.write(data)
+                await dst.drain()
+
+        async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            joined.append((reader, writer))
+            if len(joined) == 2:
+                both.set()
+            await both.wait()
+            other = joined[1] if joined[0][0] is reader else joined[0]
+            await pipe(reader, other[1])
+
+        modem = await asyncio.start_server(on_connect, "127.0.0.1", 0)
+        url = f"socket://127.0.0.1:{modem.sockets[0].getsockname()[1]}"
+        a, b = await sa.open_port(url), await sa.open_port(url)
+        client, server = await pair(a, b)
+        # Small: pyserial's socket:// reads byte by byte in a thread that waits
+        # for the GIL while the loop works -- correct, not fast.
+        ab, ba = PAYLOAD[:3000], PAYLOAD[:2000][::-1]
+        got_at_server, got_at_client = await exchange(client, server, ab, ba)
+        assert (got_at_server, got_at_client) == (ab, ba)
+        await asyncio.gather(client.aclose(), server.aclose())
+        assert (client.close_error, server.close_error) == (None, None)
+        stats = client.statistics().port
+        assert stats is not None
+        assert stats.name == url
+        modem.close()
+        for _, writer in joined:
+            writer.close()
+        await modem.wait_closed()
+
+    run(main)
+
+
+def test_open_connection_streams_half_close_and_close() -> None:
+    async def main() -> None:
+        line = MemoryLine()
+        server_task = asyncio.create_task(sa.accept(line.b))
+        reader, writer = await sa.open_connection(line.a)
+        server = await server_task
+        server.write(b"telemetry")
+        server.write_eof()
+        assert await reader.read() == b"telemetry"  # to the peer's EOF
+        assert reader.at_eof()
+        writer.write(b"still writing after the peer's EOF")
+        await writer.drain()
+        assert writer.can_write_eof()
+        writer.write_eof()
+        assert await server.read() == b"still writing after the peer's EOF"  # and our EOF
+        writer.close()
+        await writer.wait_closed()
+        await server.aclose()
+        sock = writer.get_extra_info("socket")
+        assert isinstance(sock, sa.AsyncioSerialSocket)
+        assert (sock.close_error, server.close_error) == (None, None)
+
+    run(main)
