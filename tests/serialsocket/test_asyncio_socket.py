@@ -537,3 +537,40 @@ def test_open_connection_streams_half_close_and_close() -> None:
         assert (sock.close_error, server.close_error) == (None, None)
 
     run(main)
+
+
+@pytest.mark.parametrize("deadline", [0.0, 0.0005, 0.002, 0.005, 0.01, 0.03])
+def test_cancellation_at_any_moment_leaves_no_task_and_the_listener_serving(
+    deadline: float,
+) -> None:
+    """Cancelled while connecting, writing or closing: the peer is told (or never
+    connected), no task of ours is left, and the listener accepts the next one."""
+
+    async def use(line: MemoryLine) -> None:
+        async with asyncio.timeout(deadline), sa.open_serial_socket(line.a) as sock:
+            for _ in range(50):
+                sock.write(b"x" * 2000)
+                await sock.drain()
+            await asyncio.sleep(10)
+
+    async def main() -> None:
+        line = MemoryLine()
+        async with sa.listen(line.b, EndpointConfig(linger=0.01)) as listener:
+            with pytest.raises(TimeoutError):
+                await use(line)
+            mine = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            # Only the listener's own two tasks remain.
+            assert sorted(t.get_name() for t in mine) == [
+                "serialsocket-reader",
+                "serialsocket-writer",
+            ]
+            accepting = asyncio.create_task(listener.accept())
+            async with sa.open_serial_socket(line.a) as sock:
+                peer = await accepting
+                sock.write(b"next")
+                sock.write_eof()
+                assert await peer.read() == b"next"
+                await peer.aclose()
+            assert sock.close_error is None
+
+    run(main)
