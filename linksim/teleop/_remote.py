@@ -229,9 +229,12 @@ class RemoteArm:
         self.stats.samples_applied += 1
         self.stats.ages.append(now - s.stamp)
         if s.mode is not self.mode:
-            # The words change meaning with the mode: no motion on the switch.
+            # The words change meaning with the mode: no motion on a switch.  The first
+            # sample of the channel counts from zero (the sums start with the channel).
+            first = self.mode is None
             self.mode = s.mode
-            self.reference = words.copy() if s.mode is not TeleopMode.RATE else np.zeros(6)
+            switch = s.mode is not TeleopMode.RATE and not first
+            self.reference = words.copy() if switch else np.zeros(6)
             self.q_target = self.q.copy()
             self._hold()
         if self.status is ReplyStatus.FORCE_LIMIT:

@@ -246,6 +246,8 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                         if stop_sent is None:
                             op.submit(operator.sample(now - t0, dt, stamp=now))
                         k += 1
+                    # Let the last sample and its reply cross the line before counting.
+                    await trio.sleep(2 * one_way + 2 * _line_interval(link) + 0.1)
                     op_stats = op.statistics()
             except TeleopRefused as exc:
                 error = str(exc)
