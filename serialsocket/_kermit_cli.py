@@ -60,6 +60,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     get = sub.add_parser("get", help="ask a Kermit server for files (C-Kermit's GET)")
     get.add_argument("spec", metavar="REMOTE_FILE", help="file name or pattern on the server")
     get.add_argument("directory", metavar="DIR", nargs="?", default=".", help="default: .")
+    get.add_argument(
+        "--recover",
+        action="store_true",
+        help="REGET: the server resends only what DIR does not hold yet (C-Kermit's reget)",
+    )
     remote = sub.add_parser(
         "remote", help="a REMOTE command to a Kermit server; its answer goes to stdout"
     )
@@ -186,7 +191,7 @@ async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatisti
             print(f"serialsocket kermit: server done after {count} requests", file=sys.stderr)
             return None
         if command == "get":
-            return await kermit_get(port, args.spec, args.directory, config)
+            return await kermit_get(port, args.spec, args.directory, config, recover=args.recover)
         if command == "remote":
             text = await kermit_remote(port, args.remote_command, args.argument, config)
             if text:

@@ -36,6 +36,7 @@ from serialsocket import open_port
 from serialsocket.kermit import (
     KermitConfig,
     KermitStatistics,
+    TransactionEnded,
     kermit_receive,
     kermit_send,
     kermit_server,
@@ -398,6 +399,7 @@ async def _against_server(
     served: pathlib.Path,
     client_dir: pathlib.Path,
     commands: Sequence[str],
+    ended: list[TransactionEnded] | None,
 ) -> tuple[int, int, str]:
     direction = DirectionConfig(
         rate=setup.rate, delay=setup.delay, byte_error_rate=setup.byte_error_rate
@@ -420,7 +422,13 @@ async def _against_server(
             async def serve() -> None:
                 port = await open_port(line_b)
                 async with port:
-                    count.append(await kermit_server(port, served, _our_config(setup)))
+                    count.append(
+                        await kermit_server(port, served, _our_config(setup), on_event=collect)
+                    )
+
+            def collect(event: object) -> None:
+                if isinstance(event, TransactionEnded) and ended is not None:
+                    ended.append(event)
 
             nursery.start_soon(serve)
             await trio.sleep(_START_GAP)
@@ -459,6 +467,7 @@ def run_against_server(
     served: pathlib.Path,
     client_dir: pathlib.Path,
     commands: Sequence[str],
+    ended: list[TransactionEnded] | None = None,
 ) -> tuple[int, int, str]:
     """A client runs ``commands`` against our server serving ``served``.
 
@@ -468,9 +477,10 @@ def run_against_server(
 
     Returns:
         Our server's transaction count (-1 if it had not ended when C-Kermit
-        did), C-Kermit's exit status, and its output.
+        did), C-Kermit's exit status, and its output.  ``ended`` (if given)
+        collects the server's :class:`TransactionEnded` events.
     """
-    return trio.run(_against_server, setup, served, client_dir, commands)
+    return trio.run(_against_server, setup, served, client_dir, commands, ended)
 
 
 def _setup(pair: str, base: TransferSetup, seed: int) -> TransferSetup:

@@ -58,6 +58,9 @@ from ._serve import kermit_get as kermit_get
 from ._serve import kermit_remote as kermit_remote
 from ._serve import kermit_server as kermit_server
 from ._server import KermitServer as KermitServer
+from ._server import ServerRequest as ServerRequest
+from ._server import TransactionEnded as TransactionEnded
+from ._server import TransactionStarted as TransactionStarted
 
 __all__ = [
     "MAX_KERMIT_WINDOW",
@@ -75,6 +78,9 @@ __all__ = [
     "KermitTransferError",
     "OutgoingFile",
     "RemoteReply",
+    "ServerRequest",
+    "TransactionEnded",
+    "TransactionStarted",
     "TransferComplete",
     "TransferFailed",
     "kermit_get",

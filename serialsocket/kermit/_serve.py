@@ -87,7 +87,7 @@ class _Served:
 
     def _answer(self, request: ServerRequest) -> ServerAnswer:
         kind, arg = request.kind, request.argument.strip()
-        if kind == "get":
+        if kind in ("get", "reget"):
             matches = self._matches(arg)
             if isinstance(matches, Refuse):
                 return matches
@@ -228,14 +228,20 @@ async def kermit_get(
     spec: str,
     directory: str | os.PathLike[str] = ".",
     config: KermitConfig | None = None,
+    *,
+    recover: bool = False,
 ) -> KermitStatistics:
     """GET: ask a Kermit server for the files ``spec`` names; store them in ``directory``.
+
+    ``recover``: REGET (a J packet): the server sends each file with RESEND,
+    and only what ``directory`` does not hold yet crosses the line.
 
     Raises:
         KermitTransferError: as :func:`kermit_receive` (the server's E text,
             e.g. "No files match", is in the message).
     """
-    return await kermit_receive(port, directory, config, request=("R", spec.encode("utf-8")))
+    ptype = "J" if recover else "R"
+    return await kermit_receive(port, directory, config, request=(ptype, spec.encode("utf-8")))
 
 
 async def kermit_remote(

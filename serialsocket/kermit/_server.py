@@ -10,6 +10,7 @@ I           ACK with our Send-Init field (the client's following G or R may
             then carry the negotiated block check)
 S           receive files (the client's SEND): a :class:`KermitReceiver`
 R filespec  send the files it names (GET): a :class:`KermitSender`
+J filespec  REGET: the same, each file with RESEND (C-Kermit's ``reget``)
 G D [spec]  REMOTE DIRECTORY: the listing as screen text (S, X, D..., Z, B)
 G U         REMOTE SPACE: the free space, in the ACK
 G C [dir]   REMOTE CD: change directory (inside the served tree), in the ACK
@@ -29,6 +30,7 @@ refused) is the caller's ``handler``: the core does no file I/O.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import io
 from collections import deque
@@ -81,7 +83,7 @@ class ServerState(enum.Enum):
 
 @dataclass(frozen=True, slots=True)
 class ServerRequest:
-    """What a client asked: ``kind`` is ``get``, ``send`` or one of
+    """What a client asked: ``kind`` is ``get``, ``reget``, ``send`` or one of
     :data:`GENERIC_COMMANDS`' values; ``argument`` is the file spec or the
     directory, decoded (empty when none came)."""
 
@@ -132,10 +134,15 @@ class TransactionStarted:
 
 @dataclass(frozen=True, slots=True)
 class TransactionEnded:
-    """A transaction ended; ``failure`` is its message when it failed."""
+    """A transaction ended; ``failure`` is its message when it failed.
+
+    ``statistics``: its sender's or receiver's counters (None when it was
+    answered in one packet: a reply or a refusal).
+    """
 
     request: ServerRequest
     failure: str | None = None
+    statistics: KermitStatistics | None = None
 
 
 ServerEvent = KermitEvent | TransactionStarted | TransactionEnded
@@ -327,6 +334,9 @@ class KermitServer:
         if ptype == PacketType.RECEIVE_INIT:
             self._answer(packet, ServerRequest("get", self._text(packet.data)), now)
             return
+        if ptype == "J":  # REGET: GET, sending each file with RESEND (C-Kermit)
+            self._answer(packet, ServerRequest("reget", self._text(packet.data)), now)
+            return
         if ptype == PacketType.GENERIC:
             field = _decoded(packet.data)
             kind = GENERIC_COMMANDS.get(chr(field[0]) if field else "")
@@ -336,7 +346,7 @@ class KermitServer:
                 return
             self._answer(packet, ServerRequest(kind, _first_argument(field[1:])), now)
             return
-        if ptype in (PacketType.COMMAND, "K", "H", "V", "W", "J", "O"):
+        if ptype in (PacketType.COMMAND, "K", "H", "V", "W", "O"):
             self.transactions += 1
             self._reply(packet.seq, PacketType.ERROR, "Unimplemented server function")
         # Anything else (a NAK, a stray ACK, an echo) is ignored while idle.
@@ -353,7 +363,10 @@ class KermitServer:
             if request.kind in ("finish", "bye"):
                 self._state = ServerState.DONE
         elif isinstance(answer, SendFiles):
-            self._side = KermitSender(answer.files, self.config, now)
+            config = self.config
+            if request.kind == "reget":
+                config = dataclasses.replace(config, resend=True, text=False)
+            self._side = KermitSender(answer.files, config, now)
         else:
             screen = OutgoingFile(
                 answer.header, len(answer.text), io.BytesIO(answer.text), screen=True
@@ -369,8 +382,8 @@ class KermitServer:
         self._state = ServerState.TRANSACTION
         self._events.append(TransactionStarted(request))
 
-    def _end(self, failure: str | None) -> None:
-        self._events.append(TransactionEnded(self._request, failure))
+    def _end(self, failure: str | None, stats: KermitStatistics | None = None) -> None:
+        self._events.append(TransactionEnded(self._request, failure, stats))
         self._state = ServerState.IDLE
 
     def _pump(self) -> None:
@@ -387,7 +400,7 @@ class KermitServer:
                 self._out += side.data_to_send()
                 self._last = side.statistics()
                 self._side = None
-                self._end(failure)
+                self._end(failure, self._last)
                 return
 
 

@@ -64,6 +64,7 @@ OPTIONS = {
         "--timeout",
         str(TIMEOUT),
         "--stats",
+        "--literal-names",  # C-Kermit is told "set file names literal" too
     ]
     for window in (8, 16)
 }

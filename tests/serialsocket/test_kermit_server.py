@@ -20,6 +20,7 @@ from serialsocket.kermit import (
     KermitConfig,
     KermitReceiver,
     KermitServer,
+    KermitStatistics,
     KermitTransferError,
     OutgoingFile,
     RemoteReply,
@@ -141,7 +142,11 @@ def test_an_upload_is_received() -> None:
         collect(e)
     assert bytes(got) == b"abc"
     assert events[0] == TransactionStarted(ServerRequest("send"))
-    assert events[-1] == TransactionEnded(ServerRequest("send"), None)
+    last = events[-1]
+    assert isinstance(last, TransactionEnded)
+    assert (last.request, last.failure) == (ServerRequest("send"), None)
+    assert last.statistics is not None
+    assert last.statistics.file_bytes == 3
 
 
 # -- ours against ours over a pty ---------------------------------------------------
@@ -278,3 +283,54 @@ def test_command_line_get_fetches_from_our_server(tmp_path: pathlib.Path, client
     assert status == 0, output
     assert count == -1  # no FINISH: the server is still serving
     assert (where / "a.txt").read_bytes() == (root / "a.txt").read_bytes()
+
+
+# -- REGET ---------------------------------------------------------------------------------
+
+
+def test_c_kermit_reget_fetches_only_the_rest(tmp_path: pathlib.Path) -> None:
+    """C-Kermit's ``reget``: the J packet; our server sends with RESEND, and
+    C-Kermit answers with the size of the part it holds."""
+    if not available("ckermit"):
+        pytest.skip("ckermit not installed: .ci/run installs it (apt-get install ckermit)")
+    root, client = _tree(tmp_path)
+    data = bytes(range(256)) * 400
+    (root / "big.bin").write_bytes(data)
+    (client / "big.bin").write_bytes(data[:40_000])
+    setup = TransferSetup(
+        sender="ckermit", receiver="ours", window=8, delay=0.02, byte_error_rate=1e-5, limit=60
+    )
+    ended: list[TransactionEnded] = []
+    count, status, output = run_against_server(
+        setup, root, client, ["reget big.bin", "finish"], ended
+    )
+    assert (count, status) == (2, 0), output
+    assert (client / "big.bin").read_bytes() == data
+    stats = ended[0].statistics
+    assert ended[0].request == ServerRequest("reget", "big.bin")
+    assert stats is not None
+    assert (stats.resumed_bytes, stats.file_bytes) == (40_000, len(data) - 40_000)
+
+
+def test_our_reget_against_our_server(tmp_path: pathlib.Path) -> None:
+    root = tmp_path / "served"
+    root.mkdir()
+    data = bytes(range(256)) * 100
+    (root / "r.bin").write_bytes(data)
+    down = tmp_path / "down"
+    down.mkdir()
+    (down / "r.bin.part").write_bytes(data[:10_000])  # what an interrupted GET left
+    config = KermitConfig(timeout=5.0)
+
+    async def run() -> KermitStatistics:
+        a, b = open_pty_pair()
+        with trio.fail_after(60):
+            async with a, b, trio.open_nursery() as nursery:
+                nursery.start_soon(kermit_server, b, root, config)
+                stats = await kermit_get(a, "r.bin", down, config, recover=True)
+                await kermit_remote(a, "finish", "", config)
+                return stats
+
+    stats = trio.run(run)
+    assert (down / "r.bin").read_bytes() == data
+    assert (stats.resumed_bytes, stats.file_bytes) == (10_000, len(data) - 10_000)
