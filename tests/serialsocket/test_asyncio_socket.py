@@ -495,9 +495,10 @@ def test_two_sockets_over_pyserial_socket_urls() -> None:
         modem = await asyncio.start_server(on_connect, "127.0.0.1", 0)
         url = f"socket://127.0.0.1:{modem.sockets[0].getsockname()[1]}"
         a, b = await sa.open_port(url), await sa.open_port(url)
-        client, server = await pair(a, b)
-        # Small: pyserial's socket:// reads byte by byte in a thread that waits
-        # for the GIL while the loop works -- correct, not fast.
+        # Small, and patient: pyserial's socket:// reads byte by byte in a thread
+        # that waits for the GIL while the loop works -- correct, not fast; on a
+        # loaded machine the default 2 s of silence could pass for a dead link.
+        client, server = await pair(a, b, EndpointConfig(dead_after=GUARD))
         ab, ba = PAYLOAD[:3000], PAYLOAD[:2000][::-1]
         got_at_server, got_at_client = await exchange(client, server, ab, ba)
         assert (got_at_server, got_at_client) == (ab, ba)
