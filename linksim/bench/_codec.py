@@ -1,7 +1,9 @@
 """``linksim bench codec``: Kermit encode/decode speed on this machine.
 
 Measures, for 1 MiB (by default) of random binary and of text, in the default
-printable profile and the 8-bit-clean profile:
+printable profile, the 8-bit-clean profile, and the dense encodings of
+serialsocket/DENSE.md (``escape``, ``escape+xon``, ``radix91``; not
+negotiated yet):
 
 * ``encode`` / ``decode``: the data-field codec over the whole buffer;
 * ``packetize`` / ``parse``: the full packet path at a given maximum packet
@@ -21,20 +23,47 @@ import random
 import time
 from collections.abc import Callable
 from functools import partial
+from typing import Protocol
 
 from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
+    XON_XOFF,
     BlockCheck,
-    Encoding,
+    EscapeEncoding,
     Packet,
     PacketParser,
     PacketReceived,
+    PacketType,
+    Radix91Encoding,
     build_packet,
     data_capacity,
 )
 
-__all__ = ["run", "sample_payload"]
+__all__ = ["PROFILES", "run", "sample_payload"]
+
+
+class _FieldCodec(Protocol):
+    """What a sender and a receiver use of a data-field encoding."""
+
+    def encode(self, data: bytes, /) -> bytes: ...
+    def decode(self, field: bytes, /) -> bytes: ...
+    def decode_fields(self, fields: list[bytes], /) -> bytes: ...
+    def encode_fields(
+        self, data: memoryview, capacity: int, count: int, /
+    ) -> list[tuple[bytes, int]]: ...
+
+
+PROFILES: tuple[tuple[str, _FieldCodec], ...] = (
+    ("printable", PRINTABLE),
+    ("8bit", EIGHT_BIT_CLEAN),
+    ("escape", EscapeEncoding()),
+    ("escape+xon", EscapeEncoding(unsafe=XON_XOFF)),
+    ("radix91", Radix91Encoding()),
+)
+"""The Kermit profiles, then the dense encodings (serialsocket/DENSE.md; not
+negotiated yet): 8-bit escape of MARK and CAN only, or of XON/XOFF too, and
+radix-91 for printable lines."""
 
 _WORDS = (
     "move arm to position rock bin center fingers close open weigh return home joint velocity "
@@ -66,7 +95,7 @@ def _best(fn: Callable[[], object], repeat: int) -> float:
     return best
 
 
-def _packetize(data: bytes, enc: Encoding, max_len: int) -> bytes:
+def _packetize(data: bytes, enc: _FieldCodec, max_len: int) -> bytes:
     cap = data_capacity(max_len, BlockCheck.CRC16)
     view = memoryview(data)
     wire: list[bytes] = []
@@ -74,7 +103,7 @@ def _packetize(data: bytes, enc: Encoding, max_len: int) -> bytes:
     while view:
         # A sender fills a window at a time: 31 packets, Kermit's largest window.
         for field, used in enc.encode_fields(view, cap, 31):
-            wire.append(build_packet(Packet(seq=seq, type="D", data=field)))
+            wire.append(build_packet(Packet(seq=seq, type=PacketType.DATA, data=field)))
             view = view[used:]
             seq = (seq + 1) & 63
     return b"".join(wire)
@@ -85,12 +114,10 @@ READ_SIZE = 65536
 the port for (``serialsocket._driver._READ_SIZE``)."""
 
 
-def _parse(wire: bytes, enc: Encoding, max_len: int, read: int = READ_SIZE) -> bytes:
-    """Parse ``read`` bytes at a time; decode the fields of each read together.
-
-    Tokens never span packets, so the concatenated in-order fields decode
-    exactly as the fields one by one would (``Receiver.take_fields`` joins
-    the fields of one arrival for the same reason).
+def _parse(wire: bytes, enc: _FieldCodec, max_len: int, read: int = READ_SIZE) -> bytes:
+    """Parse ``read`` bytes at a time; decode the fields of each read together
+    (``decode_fields``: one vectorised pass, as ``Receiver.take_fields`` does
+    with the fields of one arrival).
     """
     parser = PacketParser(max_length=max_len)
     out: list[bytes] = []
@@ -100,11 +127,11 @@ def _parse(wire: bytes, enc: Encoding, max_len: int, read: int = READ_SIZE) -> b
         while (ev := parser.next_event()) is not None:
             if isinstance(ev, PacketReceived):
                 fields.append(ev.packet.data)
-        out.append(enc.decode(b"".join(fields)))
+        out.append(enc.decode_fields(fields))
     return b"".join(out)
 
 
-def _parse_per_field(wire: bytes, enc: Encoding, max_len: int) -> bytes:
+def _parse_per_field(wire: bytes, enc: _FieldCodec, max_len: int) -> bytes:
     """Parse the whole stream; decode every field on its own (one call per packet)."""
     parser = PacketParser(max_length=max_len)
     parser.receive_data(wire)
@@ -120,7 +147,7 @@ def run(size: int, repeat: int, max_len: int) -> list[dict[str, object]]:
     results: list[dict[str, object]] = []
     for kind in ("binary", "text"):
         data = sample_payload(kind, size)
-        for name, enc in (("printable", PRINTABLE), ("8bit", EIGHT_BIT_CLEAN)):
+        for name, enc in PROFILES:
             field = enc.encode(data)
             if enc.decode(field) != data:
                 raise AssertionError(f"codec round trip failed for {kind}/{name}")

@@ -203,3 +203,11 @@ def test_parser_fast_path_gives_the_events_of_the_general_path(
         return events, parser.statistics(), parser.buffered
 
     assert run(fast=True) == run(fast=False)
+
+
+@given(enc=profiles, data=st.one_of(payloads, long_payloads()), capacity=st.integers(5, 200))
+def test_decode_fields_equals_decoding_one_by_one(
+    enc: Encoding, data: bytes, capacity: int
+) -> None:
+    fields = [field for field, _ in enc.encode_fields(data, capacity, 10_000)]
+    assert enc.decode_fields(fields) == b"".join(enc.decode(f) for f in fields) == data

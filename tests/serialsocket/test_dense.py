@@ -253,3 +253,47 @@ def test_crc32_matches_crcmod_and_bitwise(data: bytes) -> None:
     expected = crcmod.predefined.mkCrcFun("crc-32")(data)
     assert crc32_ieee(data) == expected == crc32_bitwise(data)
     assert all(32 <= c <= 95 for c in crc32_chars(data))
+
+
+@given(
+    enc=encodings,
+    data=long_payloads,
+    capacity=st.integers(2, 200),
+    damage=st.none() | st.tuples(st.integers(0, 10_000), st.integers(0, 255)),
+)
+def test_decode_fields_equals_decoding_one_by_one(
+    enc: Radix91Encoding | EscapeEncoding,
+    data: bytes,
+    capacity: int,
+    damage: tuple[int, int] | None,
+) -> None:
+    fields = [field for field, _ in enc.encode_fields(data, capacity, 10_000)]
+    if damage is not None and fields:
+        at, value = damage
+        i = at % len(fields)
+        if fields[i]:
+            j = at % len(fields[i])
+            fields[i] = fields[i][:j] + bytes((value,)) + fields[i][j + 1 :]
+    try:
+        one_by_one = b"".join(enc.decode(f) for f in fields)
+    except MalformedDataError:
+        with pytest.raises(MalformedDataError):
+            enc.decode_fields(fields)
+        return
+    assert enc.decode_fields(fields) == one_by_one
+    if damage is None:
+        assert one_by_one == data
+
+
+@pytest.mark.parametrize("blocks", [1, 7, 255, 256, 600])
+def test_radix91_small_and_large_paths_agree(blocks: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    data = bytes((i * 97 + i // 13) & 0xFF for i in range(13 * blocks)) + b"\xff\x00\x80"
+    wires = set()
+    for small in (0, 10**9):
+        monkeypatch.setattr("serialsocket._dense._SMALL", small)
+        wire = RADIX91.encode(data)
+        assert RADIX91.decode(wire) == data
+        fields = RADIX91.encode_fields(data, 118, 10_000)
+        assert RADIX91.decode_fields([f for f, _ in fields]) == data
+        wires.add(wire)
+    assert wires == {reference_radix91(data)}
