@@ -27,6 +27,7 @@ from .argtypes import (
     KERMIT_WINDOW,
     RETRIES,
     SERIAL_PORT,
+    IntRange,
 )
 from .kermit import (
     REMOTE_COMMANDS,
@@ -41,6 +42,9 @@ from .kermit import (
 )
 
 __all__ = ["add_arguments", "kermit_main"]
+
+FILE_OFFSET = IntRange(0, 2**63 - 1)
+"""A byte position in a file (PSEND's start)."""
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -76,6 +80,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         "--resend",
         action="store_true",
         help="recovery (C-Kermit's RESEND): send only what the receiver does not hold yet",
+    )
+    send.add_argument(
+        "--start-at",
+        type=FILE_OFFSET,
+        default=0,
+        metavar="BYTE",
+        help="PSEND: send each file from this byte on (default 0)",
     )
     send.add_argument(
         "--text",
@@ -185,7 +196,7 @@ async def _run(args: argparse.Namespace, config: KermitConfig) -> KermitStatisti
     async with port:
         command = args.kermit_command
         if command == "send":
-            return await kermit_send(port, args.files, config)
+            return await kermit_send(port, args.files, config, start_at=args.start_at)
         if command == "server":
             count = await kermit_server(port, args.directory, config)
             print(f"serialsocket kermit: server done after {count} requests", file=sys.stderr)

@@ -147,10 +147,14 @@ async def kermit_send(
     config: KermitConfig | None = None,
     *,
     on_event: Callable[[KermitEvent], None] | None = None,
+    start_at: int = 0,
 ) -> KermitStatistics:
     """Send files to a Kermit receiver on ``port`` (C-Kermit ``-r``, G-Kermit ``-r``, ours).
 
-    Each file is sent under its base name, in binary mode.
+    Each file is sent under its base name, in binary mode (text mode with
+    ``config.text``).  ``start_at``: C-Kermit's PSEND -- each file is sent
+    from this byte on (the receiver stores what arrives; the size attribute
+    is what remains).
 
     Returns:
         The final counters, once the receiver has acknowledged every file
@@ -175,7 +179,9 @@ async def kermit_send(
             handles.append(f)
             st = os.fstat(f.fileno())
             date = datetime.datetime.fromtimestamp(st.st_mtime).strftime(_DATE_FORMAT)
-            files.append(OutgoingFile(path.name, st.st_size, f, date))
+            start = min(start_at, st.st_size)
+            f.seek(start)
+            files.append(OutgoingFile(path.name, st.st_size - start, f, date))
         sender = KermitSender(files, config, trio.current_time())
         total = sum(f.size or 0 for f in files)
         discarded: list[str] = []

@@ -8,18 +8,24 @@ test_kermit.py (delay, seeded byte corruption).
 from __future__ import annotations
 
 import io
+import pathlib
 
 import pytest
+import trio
 
+from serialsocket import open_pty_pair
 from serialsocket.kermit import (
     FileCompleted,
     FileStarted,
     KermitConfig,
     KermitReceiver,
     KermitSender,
+    KermitStatistics,
     OutgoingFile,
     TransferComplete,
     TransferFailed,
+    kermit_receive,
+    kermit_send,
 )
 from serialsocket.kermit._attributes import (
     AttributeReply,
@@ -450,3 +456,26 @@ def test_any_error_while_streaming_is_fatal() -> None:
     assert s_events[-1] == TransferFailed(
         "peer reported: Transmission error on reliable link", by_peer=True
     )
+
+
+# -- PSEND (the driver) --------------------------------------------------------------------------
+
+
+def test_psend_sends_each_file_from_the_offset(tmp_path: pathlib.Path) -> None:
+    data = _payload(9000)
+    src = tmp_path / "p.bin"
+    src.write_bytes(data)
+    out = tmp_path / "out"
+    out.mkdir()
+    config = KermitConfig(timeout=5.0, literal_names=True)
+
+    async def run() -> KermitStatistics:
+        a, b = open_pty_pair()
+        with trio.fail_after(60):
+            async with a, b, trio.open_nursery() as nursery:
+                nursery.start_soon(kermit_receive, b, out, config)
+                return await kermit_send(a, [src], config, start_at=4000)
+
+    stats = trio.run(run)
+    assert (out / "p.bin").read_bytes() == data[4000:]
+    assert stats.file_bytes == 5000

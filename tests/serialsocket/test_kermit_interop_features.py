@@ -18,6 +18,7 @@ case skips, saying why, when its program is absent.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import os
 import pathlib
@@ -218,3 +219,18 @@ def test_streaming_on_a_clean_line(tmp_path: pathlib.Path, sender: str, receiver
     else:
         assert ours.packets_sent == 5, ours
     assert (ours.naks_sent, ours.naks_received, ours.timeouts) == (0, 0, 0)
+
+
+# -- PSEND ---------------------------------------------------------------------------------------
+
+
+def test_c_kermit_psend_to_ours_delivers_the_part_from_the_offset(tmp_path: pathlib.Path) -> None:
+    _need("ckermit")
+    src, out = _dirs(tmp_path)
+    data = random.Random(11).randbytes(10_000)
+    path = src / "part.bin"
+    path.write_bytes(data)
+    setup = TransferSetup(sender="ckermit", receiver="ours", window=8, limit=60)
+    setup = dataclasses.replace(setup, extra_ckermit=(f"psend {path} 3000", "exit \\v(status)"))
+    run_transfer(dataclasses.replace(setup, literal_names=False), [path], out)
+    assert (out / "part.bin").read_bytes() == data[3000:]
