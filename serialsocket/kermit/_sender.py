@@ -145,6 +145,22 @@ class KermitSender(KermitSide):
             return 96
         return self._length or self._neg.send_max_length
 
+    def _in_flight_cap(self) -> float:
+        """Line characters worth having unacknowledged at once, when the rate is known.
+
+        A round trip's worth at the line rate (the bandwidth-delay product)
+        keeps the line busy, plus half again and a packet for slack; more only
+        queues at the port, and a resent packet waits behind that queue (at
+        2400 bit/s eight 250-character packets are 8 s).  Without ``rate`` the
+        window alone bounds it.
+        """
+        rate = self.config.rate
+        if rate is None:
+            return math.inf
+        packet = self._length + 12
+        rtt = max(2 * self.config.delay, self._min_rtt or 0.0)
+        return max(2 * packet, 1.5 * rtt / line_time(1, rate) + packet)
+
     def _choose_length(self) -> int:
         """The D packet length with the best expected goodput on this line.
 
@@ -437,7 +453,10 @@ class KermitSender(KermitSide):
         if self._streaming():
             self._stream(now, capacity)
             return
-        while not self._window.full and not self._discard:
+        cap = self._in_flight_cap()
+        while (
+            not self._window.full and not self._discard and self._window.outstanding_chars() < cap
+        ):
             if len(self._pending) < capacity and not self._eof:
                 chunk = self._file.source.read(capacity * _READ_AHEAD)
                 if chunk:

@@ -85,6 +85,10 @@ class SendWindow:
             seq, wire, sent, sent, file_bytes=file_bytes, sent_at=sent_at, ptype=ptype
         )
 
+    def outstanding_chars(self) -> int:
+        """Line characters of the packets not yet acknowledged."""
+        return sum(len(slot.wire) for slot in self._slots.values() if not slot.acked)
+
     def get(self, seq: int) -> SendSlot | None:
         """The outstanding slot with this sequence number, if any."""
         return self._slots.get(seq)
