@@ -229,7 +229,9 @@ class TeleopArm:
 
     The arm's control loop calls :meth:`latest` every tick and :meth:`reply`
     with what it did; ``on_stop`` runs at once when a STOP arrives (halt the
-    arm there).  A second operator while one is connected is refused BUSY.
+    arm there); ``on_sample``, if given, sees every sample as it arrives (an
+    arm that servos on arrival rather than on its own tick).  A second
+    operator while one is connected is refused BUSY.
     """
 
     def __init__(
@@ -239,10 +241,12 @@ class TeleopArm:
         rate_deadman: float,
         control_rate: float,
         on_stop: Callable[[], None] | None = None,
+        on_sample: Callable[[Sample, float], None] | None = None,
         nonce_source: Callable[[int], bytes] = secrets.token_bytes,
         poll_interval: float = 0.002,
     ) -> None:
         self._key = key
+        self._on_sample = on_sample
         self.rate_deadman = rate_deadman
         self.control_rate = control_rate
         self._on_stop = on_stop
@@ -273,6 +277,10 @@ class TeleopArm:
         if self._current is not None:
             return self._current.channel.statistics()
         return self._retired[-1] if self._retired else None
+
+    def _sample(self, sample: Sample, now: float) -> None:
+        if self._on_sample is not None:
+            self._on_sample(sample, now)
 
     def _stopped(self) -> None:
         self.stops += 1
@@ -332,6 +340,6 @@ class _ArmPump(_Pump):
                 self._owner._stopped()
             elif isinstance(ev, Refused):
                 self._owner.refused += 1
-            elif isinstance(ev, SampleArrived | ChannelClosed):
-                pass
+            elif isinstance(ev, SampleArrived):
+                self._owner._sample(ev.sample, ev.now)
         self.wake()

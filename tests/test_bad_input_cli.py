@@ -279,6 +279,7 @@ FREE_TEXT = {
     "capture": "relay/listen/connect/arm-server --capture: a pcapng file written, exit 1",
     "task": "console/control --task rock|FILE: parsed and previewed before anything runs, "
     "exit 2 (tests/linksim/test_taskfile.py)",
+    "compare_plot": "teleop --compare-plot: a PNG written after the runs, exit 1",
 }
 
 INT_RANGES = (link_args.IntRange, serial_args.IntRange)

@@ -9,14 +9,22 @@ arm and no sample after it moved it), 1 otherwise.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from typing import Any
 
 import trio
 
+from linksim._plotting import PlotUnavailable
 from linksim.link import PRESETS, run_virtual
-from linksim.teleop import TeleopOptions, TeleopReport, run_teleop, run_teleop_loopback
+from linksim.teleop import (
+    TeleopOptions,
+    TeleopReport,
+    plot_contact_force,
+    run_teleop,
+    run_teleop_loopback,
+)
 from tcpstream.teleop import TeleopMode
 
 from ._args import SECONDS, SECONDS_OR_ZERO, SEED, read_key
@@ -90,6 +98,12 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
         help="run on a virtual clock (required for serial and tcp for now)",
     )
     ap.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    ap.add_argument(
+        "--compare-plot",
+        metavar="FILE",
+        help="run the task under shared compliance, direct force reflection and direct force "
+        "reflection without the limit stop, and plot contact force against time (PNG) to FILE",
+    )
 
 
 def _summary(r: TeleopReport) -> str:
@@ -143,9 +157,43 @@ def teleop_main(args: argparse.Namespace) -> int:
         force_stop=not args.no_force_stop,
         duration=args.duration,
     )
+    if args.compare_plot:
+        return _compare(options, args.compare_plot, args.json)
     report = run_virtual(run_teleop, options)
     if args.json:
         print(json.dumps(report.to_json()))
     else:
         print(_summary(report))
     return 0 if report.ok else 1
+
+
+def _compare(options: TeleopOptions, path: str, as_json: bool) -> int:
+    """The three schemes on one task and line; the plot; exit 0 when shared compliance
+    held the limit and direct force reflection did not."""
+    runs: list[tuple[TeleopReport, bool]] = []
+    for scheme, stop in (
+        ("shared-compliance", True),
+        ("force-reflection", True),
+        ("force-reflection", False),
+    ):
+        opts = dataclasses.replace(options, scheme=scheme, force_stop=stop)
+        runs.append((run_virtual(run_teleop, opts), stop))
+    title = (
+        f"{options.task}, {options.mode.name.lower()} mode, {options.preset} over "
+        f"{options.transport} ({runs[0][0].one_way_delay_s:g} s one way)"
+    )
+    try:
+        plot_contact_force(runs, path, title)
+    except (PlotUnavailable, OSError) as exc:
+        print(f"linksim teleop: {exc}", file=sys.stderr)
+        return 1
+    summary = [{"force_stop": stop, **r.to_json()} for r, stop in runs]
+    if as_json:
+        print(json.dumps({"plot": path, "runs": summary}))
+    else:
+        for r, _ in runs:
+            print(_summary(r))
+        print(f"linksim teleop: plot written to {path}")
+    held = runs[0][0].max_contact_force_n <= runs[0][0].force_limit_n
+    exceeded = runs[1][0].max_contact_force_n > runs[1][0].force_limit_n
+    return 0 if held and exceeded else 1

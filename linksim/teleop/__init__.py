@@ -9,7 +9,8 @@
   limit, and shared compliance or direct force reflection.
 * :func:`run_teleop` (:class:`TeleopOptions`, :class:`TeleopReport`): the whole
   chain over the teleoperation channel of :mod:`tcpstream.teleop`;
-  :func:`run_teleop_loopback`, the loopback latency benchmark.
+  :func:`run_teleop_loopback`, the loopback latency benchmark;
+  :func:`plot_contact_force`, the schemes' contact force against time.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 from ._contact import ContactModel, Hole, Wrench
 from ._frhc import HandController, frhc_jacobian, frhc_pose
 from ._operator import Operator, Script, Waypoint, peg_script, surface_script
+from ._plot import plot_contact_force
 from ._remote import RemoteArm, RemoteConfig, RemoteStatistics, rate_deadman
 from ._run import TeleopOptions, TeleopReport, run_teleop, run_teleop_loopback, world_for
 
@@ -36,6 +38,7 @@ __all__ = [
     "frhc_jacobian",
     "frhc_pose",
     "peg_script",
+    "plot_contact_force",
     "rate_deadman",
     "run_teleop",
     "run_teleop_loopback",

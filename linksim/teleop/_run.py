@@ -24,7 +24,17 @@ import trio
 from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
 from linksim.link import DirectionConfig, LinkConfig, open_impaired_link, serial_socket_pair
 from serialsocket import SerialSocket
-from tcpstream.teleop import Backlog, TeleopArm, TeleopMode, TeleopRefused, open_teleop
+from tcpstream.teleop import (
+    Backlog,
+    ContactFlags,
+    Reply,
+    ReplyStatus,
+    Sample,
+    TeleopArm,
+    TeleopMode,
+    TeleopRefused,
+    open_teleop,
+)
 
 from ._contact import ContactModel, Hole
 from ._operator import Operator, Script, peg_script, surface_script
@@ -38,6 +48,7 @@ SAMPLE_RATE = 104.0
 CONTROL_RATE = 125.0
 """Hz: the arm's control loop (seed 000's sample rate)."""
 TABLE_DROP = 0.10
+_ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 """The table is this far below the hand's start (m)."""
 
 
@@ -351,7 +362,29 @@ async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> di
     """
     applied: list[float] = []
     numbers: list[int] = []
-    arm_end = TeleopArm(key=key, rate_deadman=0.1, control_rate=1000.0)
+    arm_end: TeleopArm
+
+    def on_sample(sample: Sample, arrived: float) -> None:
+        # The arm servos on arrival: the sample is executed now, and the reply
+        # acknowledges it (the operator's pacing window moves on).
+        applied.append(arrived - sample.stamp)
+        numbers.append(sample.sample)
+        arm_end.reply(
+            Reply(
+                sample.sample,
+                ReplyStatus.FOLLOWING,
+                ContactFlags(0),
+                2,
+                0,
+                sample.stamp,
+                0.0,
+                _ZERO6,
+                _ZERO6,
+                _ZERO6,
+            )
+        )
+
+    arm_end = TeleopArm(key=key, rate_deadman=0.1, control_rate=SAMPLE_RATE, on_sample=on_sample)
     async with trio.open_nursery() as nursery:
         listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
         port = listeners[0].socket.getsockname()[1]
@@ -360,17 +393,6 @@ async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> di
             await arm_end.serve_stream(stream)
 
         nursery.start_soon(trio.serve_listeners, serve, listeners)
-
-        async def arm_loop() -> None:
-            # The arm applies a sample as soon as it arrives (its loop wakes at 1 kHz).
-            while True:
-                await trio.sleep(0.001)
-                got = arm_end.latest()
-                if got is not None:
-                    applied.append(trio.current_time() - got[0].stamp)
-                    numbers.append(got[0].sample)
-
-        nursery.start_soon(arm_loop)
         stream = await trio.open_tcp_stream("127.0.0.1", port)
         operator = Operator(script_for("surface", TeleopMode.CARTESIAN), TeleopMode.CARTESIAN)
         async with stream, open_teleop(stream, identity=IDENTITY, key=key) as op:
