@@ -575,3 +575,45 @@ def test_cancellation_at_any_moment_leaves_no_task_and_the_listener_serving(
             assert sock.close_error is None
 
     run(main)
+
+
+def test_the_public_names_are_pinned() -> None:
+    assert sorted(sa.__all__) == [
+        "AsyncPort",
+        "AsyncioSerialListener",
+        "AsyncioSerialPort",
+        "AsyncioSerialSocket",
+        "accept",
+        "connect",
+        "listen",
+        "open_connection",
+        "open_port",
+        "open_pty_pair",
+        "open_serial_socket",
+        "serve",
+    ]
+    for name in sa.__all__:
+        assert getattr(sa, name) is not None
+
+
+def test_misuse_is_a_runtime_error_and_leaves_the_socket_usable() -> None:
+    async def main() -> None:
+        line = MemoryLine()
+        client, server = await pair(line.a, line.b)
+        first = asyncio.create_task(server.read(10))
+        await asyncio.sleep(0)
+        with pytest.raises(RuntimeError, match="already reading"):
+            await server.read(10)
+        client.write(b"one")
+        assert await first == b"one"
+        with pytest.raises(RuntimeError, match="before close"):
+            await client.wait_closed()
+        await asyncio.gather(client.aclose(), server.aclose())
+        with pytest.raises(RuntimeError, match="was closed"):
+            client.write(b"late")
+        with pytest.raises(RuntimeError, match="was closed"):
+            await client.read(1)
+        await client.aclose()  # idempotent
+        assert (client.close_error, server.close_error) == (None, None)
+
+    run(main)
