@@ -212,6 +212,9 @@ class ChannelStatistics:
     stops_received: int
     held_by_backlog: int
     held_by_window: int
+    samples_after_stop: int
+    """Operator: samples offered after its STOP (never sent); arm: samples that
+    arrived after a STOP (ignored)."""
     in_flight_bytes: int
     window_bytes: float
     delivery_rate: float | None
@@ -238,7 +241,7 @@ class _End:
                 "packets_in packets_out bytes_in bytes_out bad_packets tag_failures replays "
                 "resyncs samples_offered samples_sent samples_coalesced samples_received "
                 "samples_superseded replies_sent replies_coalesced replies_received stops_sent "
-                "stops_received held_by_backlog held_by_window"
+                "stops_received held_by_backlog held_by_window samples_after_stop"
             ).split(),
             0,
         )
@@ -388,6 +391,7 @@ class OperatorChannel(_End):
         self._nonce = nonce
         self._server_nonce = b""
         self._pending: Sample | None = None
+        self._stopped = False  # after STOP no sample is sent on this channel
         self.granted: Granted | None = None
         # Rate adaptation: (sample number, cumulative bytes sent, send time).
         self._sent: deque[tuple[int, int, float]] = deque(maxlen=_RTT_HISTORY)
@@ -409,6 +413,9 @@ class OperatorChannel(_End):
     def offer(self, sample: Sample) -> None:
         """The newest sample: it replaces one not yet sent (latest value)."""
         self._stats["samples_offered"] += 1
+        if self._stopped:
+            self._stats["samples_after_stop"] += 1
+            return
         if self._pending is not None:
             self._stats["samples_coalesced"] += 1
         self._pending = sample
@@ -421,7 +428,10 @@ class OperatorChannel(_End):
         """Queue a STOP now, ahead of any sample not yet sent (and drop that sample)."""
         if self._state is not ChannelState.OPEN:
             raise IllegalTransition(f"STOP in state {self._state.value}")
+        if self._pending is not None:
+            self._stats["samples_coalesced"] += 1  # overtaken by the STOP
         self._pending = None
+        self._stopped = True
         self._stats["stops_sent"] += 1
         self._send(TeleopKind.STOP, bytes(8))
 
@@ -636,6 +646,9 @@ class ArmChannel(_End):
             return [OperatorArrived(self.identity)]
         if kind is TeleopKind.SAMPLE and st is ChannelState.OPEN:
             sample = decode_sample(raw)
+            if self.stopped:  # the STOP is latched: nothing after it moves the arm
+                self._stats["samples_after_stop"] += 1
+                return []
             self._stats["samples_received"] += 1
             if self._latest is not None:
                 self._stats["samples_superseded"] += 1
