@@ -79,11 +79,11 @@ _MAX_RUN = 94
 _MIN_RUN = 3
 """Runs of two are sent twice: ``~"X`` would be longer than ``XX``."""
 
-_VECTOR_FROM = 2048
-"""Fields at least this long decode with the vectorised path: it has a fixed
-cost of ~40 us (some twenty numpy calls), the regular-expression path ~45 ns
-per character of random binary (measured on the 2-core reference machine; the
-two cross near 1-2 KiB)."""
+_VECTOR_FROM = 768
+"""Fields at least this long decode with the vectorised path: it costs
+~30 us + 7 ns per character of random binary (a few dozen numpy calls), the
+regular-expression path 35-55 ns per character (CPU time on the 2-core
+reference machine; the two cross near 700-1000 characters)."""
 
 _SPLICE_RUNS_PER = 1024
 """Encode runs one by one (a Python loop) while there are at most one per this
@@ -313,32 +313,35 @@ class Encoding:
         # (A memoryview of the int64 array: bisect reads it without converting
         # thousands of elements to Python ints first.)
         char_ends = ends.data
-        src_ends = char_ends if counts is None else np.cumsum(counts).data
+        src_ends = None if counts is None else np.cumsum(counts).data
         n_units = len(char_ends)
         fields: list[tuple[bytes, int]] = []
         append = fields.append
         bisect_right = bisect.bisect_right
-        char_base = unit_base = src_base = 0
+        char_base = unit_base = src_base = made = 0
         last = count - 1
         more = len(view) > len(arr)
         # A field holds at least capacity / 5 tokens (one is at most 5
         # characters) and at most `capacity` (one is at least 1): search there.
+        # (Plain comparisons, not min(): this loop runs once per packet.)
         fewest = capacity // MAX_TOKEN_LENGTH
         while unit_base < n_units:
-            cut = bisect_right(
-                char_ends,
-                char_base + capacity,
-                min(unit_base + fewest, n_units),
-                min(unit_base + capacity, n_units),
-            )
-            if cut == n_units and len(fields) == last and more:
+            lo = unit_base + fewest
+            if lo > n_units:
+                lo = n_units
+            hi = unit_base + capacity
+            if hi > n_units:
+                hi = n_units
+            cut = bisect_right(char_ends, char_base + capacity, lo, hi)
+            if cut == n_units and made == last and more:
                 # The last field may want more source than the slice held.
                 append(self.encode_prefix(view[src_base:], capacity))
                 return fields
             char_end = char_ends[cut - 1]
-            src_end = cut if counts is None else src_ends[cut - 1]
+            src_end = cut if src_ends is None else src_ends[cut - 1]
             append((flat[char_base:char_end], src_end - src_base))
-            if len(fields) == count:
+            made += 1
+            if made == count:
                 return fields
             char_base, unit_base, src_base = char_end, cut, src_end
         if len(fields) < count and src_base < len(view):

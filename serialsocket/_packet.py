@@ -162,7 +162,7 @@ def build_packet(
     if field + 2 <= MAX_NORMAL_LEN:
         covered = bytes((field + 34, seq_c, type_c)) + data
     elif field <= MAX_EXTENDED_FIELD:
-        lenx1, lenx2 = divmod(field, 95)
+        lenx1, lenx2 = field // 95, field % 95
         s = 32 + seq_c + type_c + lenx1 + lenx2 + 64
         hcheck = ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32  # type 1 over LEN..LENX2
         covered = bytes((32, seq_c, type_c, lenx1 + 32, lenx2 + 32, hcheck)) + data
