@@ -95,7 +95,8 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument(
         "--virtual",
         action="store_true",
-        help="run on a virtual clock (required for serial and tcp for now)",
+        help="one process on a virtual clock (instant, reproducible); without it serial runs "
+        "over two real ptys joined by the impaired relay, in real time",
     )
     ap.add_argument("--json", action="store_true", help="print the report as one JSON object")
     ap.add_argument(
@@ -138,10 +139,10 @@ def teleop_main(args: argparse.Namespace) -> int:
                 f"{lat['p99'] * 1e3:.2f} ms, max {lat['max'] * 1e3:.2f} ms"
             )
         return 0 if ok else 1
-    if not args.virtual:
+    if not args.virtual and args.transport == "tcp":
         print(
-            "linksim teleop: serial and tcp run on a virtual clock only for now: add --virtual "
-            "(real TCP: --transport loopback)",
+            "linksim teleop: --transport tcp runs on a virtual clock only: add --virtual "
+            "(real TCP: --transport loopback; real ptys: --transport serial)",
             file=sys.stderr,
         )
         return 2
@@ -155,11 +156,12 @@ def teleop_main(args: argparse.Namespace) -> int:
         key=key,
         stop_at=args.stop_at,
         force_stop=not args.no_force_stop,
+        real=not args.virtual,
         duration=args.duration,
     )
     if args.compare_plot:
         return _compare(options, args.compare_plot, args.json)
-    report = run_virtual(run_teleop, options)
+    report = run_virtual(run_teleop, options) if args.virtual else trio.run(run_teleop, options)
     if args.json:
         print(json.dumps(report.to_json()))
     else:
@@ -177,7 +179,8 @@ def _compare(options: TeleopOptions, path: str, as_json: bool) -> int:
         ("force-reflection", False),
     ):
         opts = dataclasses.replace(options, scheme=scheme, force_stop=stop)
-        runs.append((run_virtual(run_teleop, opts), stop))
+        report = trio.run(run_teleop, opts) if opts.real else run_virtual(run_teleop, opts)
+        runs.append((report, stop))
     title = (
         f"{options.task}, {options.mode.name.lower()} mode, {options.preset} over "
         f"{options.transport} ({runs[0][0].one_way_delay_s:g} s one way)"

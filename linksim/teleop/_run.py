@@ -12,6 +12,7 @@ on the wall clock (the latency benchmark).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import random
 from collections.abc import AsyncIterator, Callable
@@ -22,8 +23,15 @@ import numpy as np
 import trio
 
 from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
-from linksim.link import DirectionConfig, LinkConfig, open_impaired_link, serial_socket_pair
-from serialsocket import SerialSocket
+from linksim.link import (
+    DirectionConfig,
+    LinkConfig,
+    endpoint_config_for,
+    open_impaired_link,
+    run_relay,
+    serial_socket_pair,
+)
+from serialsocket import SerialSocket, accept, connect, open_port
 from tcpstream.teleop import (
     Backlog,
     ContactFlags,
@@ -66,6 +74,8 @@ class TeleopOptions:
     stop_at: float | None = None
     """Script seconds at which the operator presses the emergency stop."""
     force_stop: bool = True
+    real: bool = False
+    """Serial only: real ptys joined by the impaired relay, on the wall clock."""
     duration: float | None = None
     """Script seconds to run (default: the script, then the line's round trip and 1 s)."""
     timeout: float = 600.0
@@ -170,6 +180,11 @@ async def _streams(
         trio.abc.Stream, trio.abc.Stream, Callable[[], Backlog] | None, Callable[[], Backlog] | None
     ]
 ]:
+    if options.transport == "serial" and options.real:
+        async with _pty_pair(link) as (ctl, arm):
+            slack, char = _line_interval(link), link.a_to_b.char_time
+            yield ctl, arm, _SerialFigures(ctl, char, 0.0), _SerialFigures(arm, char, slack)
+        return
     if options.transport == "serial":
         async with serial_socket_pair(link) as (ctl, arm):
             slack, char = _line_interval(link), link.a_to_b.char_time
@@ -179,6 +194,45 @@ async def _streams(
     line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
     async with open_impaired_link(line) as (ctl_end, arm_end):
         yield ctl_end, arm_end, None, None
+
+
+@contextlib.asynccontextmanager
+async def _pty_pair(link: LinkConfig) -> AsyncIterator[tuple[SerialSocket, SerialSocket]]:
+    """Two serial sockets on two real ptys joined by ``linksim relay``'s impaired line."""
+    rate = link.a_to_b.rate
+    baud = int(rate) if rate is not None else 115200
+    paths: list[str] = []
+    ready = trio.Event()
+    stop = trio.Event()
+
+    def on_ready(a: str, b: str) -> None:
+        paths.extend([a, b])
+        ready.set()
+
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(functools.partial(run_relay, link, stop=stop, on_ready=on_ready))
+        await ready.wait()
+        port_a = await open_port(paths[0], baud)
+        port_b = await open_port(paths[1], baud)
+        config = endpoint_config_for(link)
+        sockets: dict[str, SerialSocket] = {}
+        try:
+            async with trio.open_nursery() as handshake:
+
+                async def accept_b() -> None:
+                    sockets["b"] = await accept(port_b, config)
+
+                handshake.start_soon(accept_b)
+                sockets["a"] = await connect(port_a, config)
+            yield sockets["a"], sockets["b"]
+        finally:
+            with trio.move_on_after(5.0) as scope:
+                scope.shield = True
+                for sock in sockets.values():
+                    await sock.aclose()
+                await port_a.aclose()
+                await port_b.aclose()
+            stop.set()
 
 
 def _line_interval(link: LinkConfig) -> float:
