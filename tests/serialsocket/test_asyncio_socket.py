@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import os
 import queue
+import random
 import subprocess
 import sys
 import threading
@@ -52,6 +53,8 @@ class MemoryEnd:
 
     ``cut`` silently drops everything written from then on, both ways: the
     ports stay up and the link goes silent, as on a line whose carrier died.
+    ``error_rate``: each byte written has one bit flipped with this
+    probability (a seeded RNG), as line noise does.
     """
 
     def __init__(self, line: MemoryLine, inbox: asyncio.Queue[bytes], peer: asyncio.Queue[bytes]):
@@ -61,7 +64,15 @@ class MemoryEnd:
         return await self._inbox.get()
 
     async def write(self, data: bytes) -> None:
-        if not self._line.cut:
+        line = self._line
+        if line.error_rate:
+            noisy = bytearray(data)
+            for i in range(len(noisy)):
+                if line.rng.random() < line.error_rate:
+                    noisy[i] ^= 1 << line.rng.randrange(8)
+                    line.flipped += 1
+            data = bytes(noisy)
+        if not line.cut:
             self._peer.put_nowait(bytes(data))
         await asyncio.sleep(0)
 
@@ -70,10 +81,13 @@ class MemoryEnd:
 
 
 class MemoryLine:
-    def __init__(self) -> None:
+    def __init__(self, error_rate: float = 0.0, seed: int = 1) -> None:
         ab: asyncio.Queue[bytes] = asyncio.Queue()
         ba: asyncio.Queue[bytes] = asyncio.Queue()
         self.cut = False
+        self.error_rate = error_rate
+        self.rng = random.Random(seed)
+        self.flipped = 0
         self.a = MemoryEnd(self, ba, ab)
         self.b = MemoryEnd(self, ab, ba)
 
@@ -123,6 +137,27 @@ def test_both_directions_at_once_byte_exact_over_a_pty() -> None:
         assert stats.link.bytes_delivered == len(back)
         assert stats.port is not None
         assert stats.port.bytes_out == stats.port_bytes_out > 0
+
+    run(main)
+
+
+def test_both_directions_at_once_byte_exact_over_a_noisy_line() -> None:
+    """Bit errors both ways (1 byte in 2000): every damaged packet is rejected by
+    its check and repaired by NAK or timeout; the data arrives exact, once."""
+
+    async def main() -> None:
+        line = MemoryLine(error_rate=5e-4, seed=7)
+        client, server = await pair(line.a, line.b)
+        back = PAYLOAD[::-1]
+        got_at_server, got_at_client = await exchange(client, server, PAYLOAD, back)
+        assert got_at_server == PAYLOAD
+        assert got_at_client == back
+        await asyncio.gather(client.aclose(), server.aclose())
+        assert (client.close_error, server.close_error) == (None, None)
+        assert line.flipped > 0
+        links = [client.statistics().link, server.statistics().link]
+        assert sum(st.check_failures + st.rejected for st in links) > 0
+        assert sum(st.retransmissions for st in links) > 0
 
     run(main)
 
