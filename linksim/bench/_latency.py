@@ -458,7 +458,7 @@ def _report(
 _BENCH_KEY = b"latency-benchmark-key-0123456789"
 
 
-async def _measure_trio(
+async def _measure_in_loop(
     transport: str, count: int, warmup: int, block: int, key: bytes | None
 ) -> tuple[list[float], list[float]]:
     return await TRANSPORTS[transport](count, warmup, block, key)
@@ -495,7 +495,7 @@ def run(
         raise ValueError("the asyncio client cannot share a loop with the trio servers")
     key = _BENCH_KEY if authenticated else None
     if server == "loop":
-        samples = trio.run(_measure_trio, transport, count, warmup, block, key)
+        samples = trio.run(_measure_in_loop, transport, count, warmup, block, key)
     else:
         samples = _measure_apart(transport, client, count, warmup, block, key)
     return _report(transport, client, server, count, key, samples)
