@@ -120,6 +120,14 @@ _T_FLAT = _T.ravel()
 """Row-major flattening: ``_T_FLAT[state * 4 + class]`` is a 1-D gather."""
 _T_TRANS = _T_FLAT.tobytes().ljust(256, b"\0")
 """The same table as a ``bytes.translate`` table (indices 0..19 used)."""
+_T2_TRANS = bytes(
+    int(_T[_T[s, c1], c2]) for s in range(5) for c1 in range(4) for c2 in range(4)
+).ljust(256, b"\0")
+"""Two steps at once: ``_T2_TRANS[state * 16 + class1 * 4 + class2]`` (indices 0..79)."""
+
+_DENSE_BELOW = 1 << 16
+"""Fields shorter than this settle their states with whole-array rounds two
+characters at a time; longer ones with sparse one-character rounds."""
 
 _CTL_RANGE = bytes(64 if 63 <= (c & 0x7F) <= 95 else 0 for c in range(256))
 """``translate`` table: 64 where ``ctl()`` applies after QCTL ('?'..'_', either half)."""
@@ -482,18 +490,51 @@ class Encoding:
 
     def _decode_vector(self, raw: bytes) -> bytes:
         """Long fields: all positions at once (see the module docstring)."""
-        arr = np.frombuffer(raw, dtype=np.uint8)
-        n = arr.size
+        n = len(raw)
         # All small-table lookups go through bytes.translate: it runs at memory
         # speed, several times faster than numpy fancy indexing on int8 tables.
         cls_table, start_table = _class_table(self.qctl, self.qbin, self.rept)
         cls = np.frombuffer(raw.translate(cls_table), np.int8)
-        # st[i] is the state before character i.  Round 0 guesses "token start"
-        # everywhere; round 1 redoes every position at once; later rounds touch
-        # only positions whose predecessor changed.
+        # st[i] is the state before character i.  Round 0 guesses that the
+        # character before is a token start; then the guesses settle.
         st = np.empty(n, dtype=np.int8)
         st[0] = _S0
         st[1:] = np.frombuffer(raw.translate(start_table), np.int8)[:-1]
+        if n < _DENSE_BELOW:
+            if not self._settle_in_pairs(st, cls):
+                return self._decode_split(raw)
+        elif not self._settle_sparse(st, cls):
+            return self._decode_split(raw)
+        if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
+            raise _dangling()
+        return self._emit_decoded(raw, st)
+
+    @staticmethod
+    def _settle_in_pairs(st: npt.NDArray[np.int8], cls: npt.NDArray[np.int8]) -> bool:
+        """Fixed point of the states, two characters per step (medium fields).
+
+        ``st[i] = T2[st[i-2], cls[i-2], cls[i-1]]`` with ``T2`` the machine's
+        table composed with itself: every full-array round fixes chains two
+        characters further, so a field needs half the rounds, each a handful
+        of numpy calls (their fixed cost is what matters below ~64 KiB).
+        Returns False if it has not settled after ``_MAX_ROUNDS``.
+        """
+        if st.size < 3:
+            return True
+        pair = cls[:-2] * 4 + cls[1:-1]
+        for _ in range(_MAX_ROUNDS):
+            new = _lookup(_T2_TRANS, st[:-2] * 16 + pair)
+            if np.array_equal(new, st[2:]):
+                return True
+            st[2:] = new
+        return False
+
+    @staticmethod
+    def _settle_sparse(st: npt.NDArray[np.int8], cls: npt.NDArray[np.int8]) -> bool:
+        """Fixed point of the states: one full round, then only the positions
+        whose predecessor changed (long fields, where whole-array passes cost
+        more than calls).  Returns False if not settled after ``_MAX_ROUNDS``."""
+        n = st.size
         new = _lookup(_T_TRANS, st[:-1] * 4 + cls[:-1])
         changed = np.flatnonzero(new != st[1:]) + 1
         st[1:] = new
@@ -502,13 +543,17 @@ class Encoding:
         while pending.size:
             rounds += 1
             if rounds > _MAX_ROUNDS:
-                return self._decode_split(raw)
+                return False
             new = _T_FLAT[st[pending - 1] * 4 + cls[pending - 1]]
             changed = pending[new != st[pending]]
             st[pending] = new
             pending = changed[changed < n - 1] + 1
-        if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
-            raise _dangling()
+        return True
+
+    def _emit_decoded(self, raw: bytes, st: npt.NDArray[np.int8]) -> bytes:
+        """The bytes of a field whose states are known."""
+        arr = np.frombuffer(raw, dtype=np.uint8)
+        n = arr.size
         # Every output byte in place: the character, ctl()'d after QCTL, with
         # bit 7 set when its token had QBIN (just before it, or before its QCTL).
         after_qctl = st == _AFTER_QCTL
