@@ -31,13 +31,15 @@ start" (unless that character was a repeat count).
   (``re.split`` with a capturing group: ordinary characters between tokens
   come out as runs), and each prefixed token is looked up in a table.
 * Long fields (a window of packets decoded together) guess that every
-  character starts in "token start", then repeatedly recompute only the
-  positions whose predecessor's state differs from the guess.  Real data
-  converges in a few rounds; an adversarial field such as ``####...`` would
-  need one round per character, so after ``_MAX_ROUNDS`` we switch to the
-  short-field decoder, which is exact for every input.  Once the states are
-  known, every output byte is computed in place (XOR 64 after QCTL, OR 128
-  after QBIN) and the literals are compressed out in one pass.
+  character follows a token start, then let the guesses settle: fields under
+  64 KiB recompute every position from the state two characters back (the
+  machine's table composed with itself), longer ones only the positions
+  whose predecessor changed.  Real data settles in a few rounds; an
+  adversarial field such as ``####...`` would need one round per character
+  or two, so after ``_MAX_ROUNDS`` we switch to the short-field decoder,
+  which is exact for every input.  Once the states are known, every output
+  byte is computed in place (XOR 64 after QCTL, OR 128 after QBIN) and the
+  literals are compressed out in one pass.
 
 :func:`_reference_encode`, :func:`_reference_encode_prefix` and
 :func:`_reference_decode` are the plain one-token-at-a-time definitions
