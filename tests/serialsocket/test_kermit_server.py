@@ -13,8 +13,9 @@ import pathlib
 import pytest
 import trio
 
-from linksim.bench._kermit import TransferSetup, available, run_against_server
-from serialsocket import open_pty_pair
+from linksim.bench._kermit import TransferSetup, _ckermit_argv, available, run_against_server
+from linksim.link import DirectionConfig, LinkConfig, run_relay
+from serialsocket import open_port, open_pty_pair
 from serialsocket.kermit import (
     FileData,
     KermitConfig,
@@ -334,3 +335,65 @@ def test_our_reget_against_our_server(tmp_path: pathlib.Path) -> None:
     stats = trio.run(run)
     assert (down / "r.bin").read_bytes() == data
     assert (stats.resumed_bytes, stats.file_bytes) == (10_000, len(data) - 10_000)
+
+
+# -- our client against C-Kermit's server ----------------------------------------------------
+
+
+def test_our_client_against_c_kermit_server(tmp_path: pathlib.Path) -> None:
+    """``serialsocket kermit get`` and ``remote dir/space/finish`` against C-Kermit's SERVER."""
+    if not available("ckermit"):
+        pytest.skip("ckermit not installed: .ci/run installs it (apt-get install ckermit)")
+    served = tmp_path / "served"
+    served.mkdir()
+    (served / "a.txt").write_bytes(b"from c-kermit\n" * 50)
+    down = tmp_path / "down"
+    down.mkdir()
+    setup = TransferSetup(sender="ckermit", receiver="ours", delay=0.02, byte_error_rate=1e-5)
+    config = KermitConfig(timeout=5.0, literal_names=True)
+    answers: list[str] = []
+    status: list[int] = []
+
+    async def main() -> None:
+        line = LinkConfig.symmetric(
+            DirectionConfig(delay=setup.delay, byte_error_rate=setup.byte_error_rate), seed=2
+        )
+        with trio.fail_after(60):
+            async with trio.open_nursery() as nursery:
+                ready: list[tuple[str, str]] = []
+                got = trio.Event()
+
+                def on_ready(a: str, b: str) -> None:
+                    ready.append((a, b))
+                    got.set()
+
+                nursery.start_soon(lambda: run_relay(line, stop=trio.Event(), on_ready=on_ready))
+                await got.wait()
+                ours, theirs = ready[0]
+                argv = _ckermit_argv(setup, theirs, [])
+                argv[-1] = argv[-1].replace("receive, exit \\v(status)", "server, exit")
+
+                async def serve() -> None:
+                    result = await trio.run_process(
+                        argv, cwd=served, capture_stdout=True, capture_stderr=True, check=False
+                    )
+                    status.append(result.returncode)
+
+                nursery.start_soon(serve)
+                await trio.sleep(1.0)  # C-Kermit opens its line and enters server mode
+                port = await open_port(ours)
+                async with port:
+                    await kermit_get(port, "a.txt", down, config)
+                    answers.append(await kermit_remote(port, "dir", "", config))
+                    answers.append(await kermit_remote(port, "space", "", config))
+                    answers.append(await kermit_remote(port, "finish", "", config))
+                while not status:
+                    await trio.sleep(0.05)
+                nursery.cancel_scope.cancel()
+
+    trio.run(main)
+    assert (down / "a.txt").read_bytes() == (served / "a.txt").read_bytes()
+    assert "a.txt" in answers[0]
+    assert "Available" in answers[1] or "free" in answers[1].lower()
+    assert answers[2] == ""
+    assert status == [0]
