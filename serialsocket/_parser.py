@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from ._checks import _CRC16_FUN, _CRC16_TABLE, BlockCheck, check_chars
 from ._errors import LocalProtocolError
-from ._packet import Packet, _slot_setter, _trusted_packet
+from ._packet import _SET_DATA, _SET_SEQ, _SET_TYPE, Packet, _slot_setter, _trusted_packet
 from ._wire import (
     DEFAULT_MAX_PACKET_LENGTH,
     EXTENDED_HEADER_LENGTH,
@@ -69,6 +69,9 @@ _SPECIAL_TYPES = frozenset(
 
 _CRC16 = BlockCheck.CRC16
 """(Enum member lookups cost a descriptor call each in Python 3.11.)"""
+
+_FAST_TYPE = bytes(33 <= c <= 126 and c not in _SPECIAL_TYPES for c in range(256))
+"""Type bytes the fast path takes: printable, and checked with the check in force."""
 
 _KNOWN = {ord(t.value): t for t in PacketType}
 _TYPES: tuple[str, ...] = tuple(_KNOWN.get(c, chr(c)) for c in range(256))
@@ -304,8 +307,8 @@ class PacketParser:
             end > n
             or end - pos > self._max_length
             or end - start < 3
-            or not (32 <= seq_c <= 95 and 33 <= type_c <= 126)
-            or type_c in _SPECIAL_TYPES
+            or not 32 <= seq_c <= 95
+            or not _FAST_TYPE[type_c]
             or buf.find(MARK, pos + 1, end) >= 0
         ):
             return None
@@ -319,12 +322,17 @@ class PacketParser:
         self._pos = end
         self._discarding = False
         self._packets += 1
-        return _received(
-            _trusted_packet(seq_c - 32, _TYPES[type_c], buf[start : end - 3]),
-            ln == 32,
-            _CRC16,
-            end - pos,
-        )
+        # _received(_trusted_packet(...)) written out: this is once per packet.
+        packet = _new(Packet)
+        _SET_SEQ(packet, seq_c - 32)
+        _SET_TYPE(packet, _TYPES[type_c])
+        _SET_DATA(packet, buf[start : end - 3])
+        event = _new(PacketReceived)
+        _SET_PACKET(event, packet)
+        _SET_EXTENDED(event, ln == 32)
+        _SET_CHECK(event, _CRC16)
+        _SET_LENGTH(event, end - pos)
+        return event
 
     def statistics(self) -> ParserStatistics:
         """A snapshot of the counters."""

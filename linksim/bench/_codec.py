@@ -104,12 +104,13 @@ def _packetize(data: bytes, enc: _FieldCodec, max_len: int) -> bytes:
     cap = data_capacity(max_len, BlockCheck.CRC16)
     view = memoryview(data)
     wire: list[bytes] = []
-    seq = 0
-    while view:
+    append = wire.append
+    at = seq = 0
+    while at < len(data):
         # A sender fills a window at a time: 31 packets, Kermit's largest window.
-        for field, used in enc.encode_fields(view, cap, 31):
-            wire.append(build_packet(Packet(seq=seq, type=PacketType.DATA, data=field)))
-            view = view[used:]
+        for field, used in enc.encode_fields(view[at:], cap, 31):
+            append(build_packet(Packet(seq=seq, type=PacketType.DATA, data=field)))
+            at += used
             seq = (seq + 1) & 63
     return b"".join(wire)
 
