@@ -29,7 +29,9 @@ receiver use: ``encode``, ``encode_prefix``, ``encode_fields``, ``decode``.
 
 from __future__ import annotations
 
+import array
 import bisect
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -416,16 +418,17 @@ class Radix91Encoding:
         r = _TAIL_BYTES.get(rest)
         if r is None:
             raise _malformed(f"length {len(raw)} is not a radix-91 field length")
-        digits = np.frombuffer(raw.translate(_DIGIT_OF), np.uint8)
-        if digits.size and int(digits.max()) >= 91:
+        digit_bytes = raw.translate(_DIGIT_OF)
+        if digit_bytes and max(digit_bytes) >= 91:
             raise _malformed("character outside the radix-91 alphabet")
         parts: list[bytes] = []
-        if q:
-            parts.append(
-                _block_bytes(digits[: q * _BLOCK_CHARS].reshape(q, _BLOCK_CHARS)).tobytes()
-            )
+        if q and q >= _SMALL_FIELD_BLOCKS:
+            digits = np.frombuffer(digit_bytes, np.uint8, q * _BLOCK_CHARS)
+            parts.append(_block_bytes(digits.reshape(q, _BLOCK_CHARS)).tobytes())
+        elif q:
+            parts.append(_blocks_small(digit_bytes, q))
         if r:
-            parts.append(_decode_tail(digits[q * _BLOCK_CHARS :].tobytes(), r))
+            parts.append(_decode_tail(digit_bytes[q * _BLOCK_CHARS :], r))
         return b"".join(parts)
 
     @staticmethod
@@ -525,6 +528,34 @@ class Radix91Encoding:
             parts.append(_tail_bytes(rows[:, q * _BLOCK_CHARS :], r))
         out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
         return out.tobytes()
+
+
+_SMALL_FIELD_BLOCKS = 12
+"""Fields of fewer blocks (a packet of up to ~200 characters) decode in plain
+Python: 11 us against numpy's 21 us for one 128-character packet's field;
+the two cross near 15 blocks (CPU time, 2-core reference machine)."""
+
+_PAIR_VALUE = array.array(
+    "h",
+    (
+        hi * 91 + lo if hi < 91 and lo < 91 and hi * 91 + lo < 8192 else -1
+        for hi in range(256)
+        for lo in range(256)
+    ),
+)
+"""Value of a two-digit pair read as one big-endian 16-bit word; -1 if invalid."""
+
+
+def _blocks_small(digits: bytes, q: int) -> bytes:
+    """The ``q`` blocks at the start of ``digits`` (digit values) in plain Python:
+    the ``8q`` 13-bit groups side by side are exactly the ``13q`` bytes."""
+    values = list(map(_PAIR_VALUE.__getitem__, struct.unpack_from(f">{8 * q}H", digits)))
+    if min(values) < 0:
+        raise _malformed("radix-91 pair worth 8192 or more")
+    acc = 0
+    for v in values:
+        acc = acc << 13 | v
+    return acc.to_bytes(q * _BLOCK_BYTES, "big")
 
 
 def _encode_tail(tail: bytes) -> bytes:

@@ -291,9 +291,27 @@ def test_radix91_small_and_large_paths_agree(blocks: int, monkeypatch: pytest.Mo
     wires = set()
     for small in (0, 10**9):
         monkeypatch.setattr("serialsocket._dense._SMALL", small)
+        monkeypatch.setattr("serialsocket._dense._SMALL_FIELD_BLOCKS", small)
         wire = RADIX91.encode(data)
         assert RADIX91.decode(wire) == data
         fields = RADIX91.encode_fields(data, 118, 10_000)
         assert RADIX91.decode_fields([f for f, _ in fields]) == data
         wires.add(wire)
     assert wires == {reference_radix91(data)}
+
+
+@given(field=st.lists(st.sampled_from(RADIX91_ALPHABET), max_size=300).map(bytes))
+def test_radix91_python_and_numpy_block_decoders_agree(field: bytes) -> None:
+    import serialsocket._dense as dense
+
+    def run(blocks: int) -> bytes | str:
+        old = dense._SMALL_FIELD_BLOCKS
+        dense._SMALL_FIELD_BLOCKS = blocks
+        try:
+            return RADIX91.decode(field)
+        except MalformedDataError as exc:
+            return str(exc)
+        finally:
+            dense._SMALL_FIELD_BLOCKS = old
+
+    assert run(0) == run(10**9)
