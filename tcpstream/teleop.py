@@ -13,6 +13,8 @@ Operator: :func:`open_teleop` gives a :class:`TeleopOperator`; call
 Arm: :class:`TeleopArm` with ``serve_stream(stream)``; its control loop reads
 ``latest()`` and answers ``reply(Reply(...))``.  The sans-I/O ends
 (:class:`OperatorChannel`, :class:`ArmChannel`) and the codec are here too.
+Both on one line (a serial socket): :func:`open_mux` splits a stream into a
+command channel and a sample channel, commands always first.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from ._teleop_connection import (
     StopArrived,
     TeleopEvent,
 )
+from ._teleop_mux import COMMANDS, MAX_FRAME, TELEOP, MuxChannel, StreamMux, open_mux
 from ._teleop_packet import (
     MAGIC,
     TAG_SIZE,
@@ -57,8 +60,11 @@ from ._teleop_packet import (
 )
 
 __all__ = [
+    "COMMANDS",
     "MAGIC",
+    "MAX_FRAME",
     "TAG_SIZE",
+    "TELEOP",
     "TELEOP_VERSION",
     "TRANSITIONS",
     "ArmChannel",
@@ -70,6 +76,7 @@ __all__ = [
     "ContactFlags",
     "Granted",
     "IllegalTransition",
+    "MuxChannel",
     "OperatorArrived",
     "OperatorChannel",
     "RefuseCode",
@@ -80,6 +87,7 @@ __all__ = [
     "Sample",
     "SampleArrived",
     "StopArrived",
+    "StreamMux",
     "TeleopArm",
     "TeleopEvent",
     "TeleopKind",
@@ -92,6 +100,7 @@ __all__ = [
     "decode_sample",
     "encode_reply",
     "encode_sample",
+    "open_mux",
     "open_teleop",
     "size_of",
 ]

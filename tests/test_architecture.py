@@ -391,7 +391,13 @@ def test_tcpstream_public_names_are_pinned() -> None:
 
     assert sorted(teleop.__all__) == sorted(
         [
+            "COMMANDS",
             "MAGIC",
+            "MAX_FRAME",
+            "TELEOP",
+            "MuxChannel",
+            "StreamMux",
+            "open_mux",
             "TAG_SIZE",
             "TELEOP_VERSION",
             "TRANSITIONS",

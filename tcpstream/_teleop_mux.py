@@ -1,0 +1,268 @@
+"""Two streams over one, commands first: the command session and the sample channel on one line.
+
+A serial line is one stream; the command session and the teleoperation
+channel each want their own.  :func:`open_mux` splits a reliable stream into
+two, :attr:`StreamMux.commands` (channel 0) and :attr:`StreamMux.teleop`
+(channel 1), both ends alike.  Framing (PROTOCOL.md 14.7)::
+
+    offset size field
+         0    1 channel   0 commands, 1 teleoperation
+         1    2 length    payload bytes, 1..1024 (u16); 0 = this channel is closed
+         3    n payload
+
+**Priority**: the one writer always sends what the command channel holds
+before anything of the teleoperation channel's, one frame at a time, so a
+command (an emergency stop) waits at most behind the one frame already being
+written.  The teleoperation channel's pacing (``Backlog``) sees the mux's own
+queue (:meth:`StreamMux.backlog`) added to the transport's.
+
+Each channel is a :class:`trio.abc.Stream` (it passes trio's
+``check_two_way_stream``).  Closing one sends its close frame: the peer's
+channel then reads EOF and its writes fail (``BrokenResourceError``), like a
+TCP connection's.  The end of the underlying stream ends both.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import operator
+import struct
+from collections.abc import AsyncIterator
+
+import trio
+
+__all__ = ["COMMANDS", "MAX_FRAME", "TELEOP", "MuxChannel", "StreamMux", "open_mux"]
+
+COMMANDS = 0
+TELEOP = 1
+MAX_FRAME = 1024
+"""Payload bytes per frame: a few packets; a command waits behind at most this much of ours."""
+MAX_QUEUED = 65536
+"""Bytes one channel may hold unsent before ``send_all`` waits (flow control)."""
+MAX_UNREAD = 262144
+"""Bytes received and not yet read on one channel before the mux stops reading the line."""
+_HEAD = struct.Struct("!BH")
+
+
+class MuxChannel(trio.abc.Stream):
+    """One of the mux's two streams."""
+
+    def __init__(self, mux: StreamMux, number: int) -> None:
+        self._mux = mux
+        self.number = number
+        self._out = bytearray()
+        self._in = bytearray()
+        self._eof = False  # the peer closed its side (or the line ended)
+        self._closed = False  # we closed
+        self._broken: BaseException | None = None
+        self._sending = False
+        self._receiving = False
+        self._changed = trio.Event()
+
+    def _notify(self) -> None:
+        self._changed.set()
+        self._changed = trio.Event()
+
+    @property
+    def queued(self) -> int:
+        """Bytes handed to ``send_all`` and not yet written to the line."""
+        return len(self._out)
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        if self._sending:
+            raise trio.BusyResourceError("another task is sending on this channel")
+        self._sending = True
+        try:
+            await trio.lowlevel.checkpoint()
+            view = memoryview(data).cast("B")
+            while True:
+                self._check_send()
+                room = MAX_QUEUED - len(self._out)
+                if room > 0 and view:
+                    take = view[:room]
+                    self._out += take
+                    view = view[len(take) :]
+                    self._mux._wake()
+                if not view:
+                    return
+                await self._changed.wait()
+        finally:
+            self._sending = False
+
+    def _check_send(self) -> None:
+        if self._closed:
+            raise trio.ClosedResourceError("this channel was closed")
+        if self._broken is not None:
+            raise trio.BrokenResourceError("the line failed") from self._broken
+        if self._eof:
+            raise trio.BrokenResourceError("the peer closed this channel")
+
+    async def wait_send_all_might_not_block(self) -> None:
+        if self._sending:
+            raise trio.BusyResourceError("another task is sending on this channel")
+        self._sending = True
+        try:
+            await trio.lowlevel.checkpoint()
+            while True:
+                if self._closed:
+                    raise trio.ClosedResourceError("this channel was closed")
+                if self._eof or self._broken is not None or len(self._out) < MAX_QUEUED:
+                    return
+                await self._changed.wait()
+        finally:
+            self._sending = False
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        if max_bytes is not None:
+            max_bytes = operator.index(max_bytes)  # TypeError for 1.5, as trio's streams
+            if max_bytes < 1:
+                raise ValueError("max_bytes must be >= 1")
+        if self._receiving:
+            raise trio.BusyResourceError("another task is receiving on this channel")
+        self._receiving = True
+        try:
+            await trio.lowlevel.checkpoint()
+            while True:
+                if self._closed:
+                    raise trio.ClosedResourceError("this channel was closed")
+                if self._in:
+                    n = len(self._in) if max_bytes is None else min(max_bytes, len(self._in))
+                    out = bytes(self._in[:n])
+                    del self._in[:n]
+                    self._mux._room()  # the reader may have paused for room
+                    return out
+                if self._broken is not None:
+                    raise trio.BrokenResourceError("the line failed") from self._broken
+                if self._eof:
+                    return b""
+                await self._changed.wait()
+        finally:
+            self._receiving = False
+
+    async def aclose(self) -> None:
+        if not self._closed:
+            self._closed = True  # what is queued still goes, then the close frame
+            self._mux._close_channel(self.number)
+            self._notify()
+        await trio.lowlevel.checkpoint()
+
+
+class StreamMux:
+    """The two channels over ``stream``; run :meth:`run` in a nursery (:func:`open_mux` does)."""
+
+    def __init__(self, stream: trio.abc.Stream) -> None:
+        self._stream = stream
+        self.commands = MuxChannel(self, COMMANDS)
+        self.teleop = MuxChannel(self, TELEOP)
+        self._channels = (self.commands, self.teleop)
+        self._close_frames: list[int] = []
+        self._wake_event = trio.Event()
+        self._room_event = trio.Event()
+        self.frames_out = [0, 0]
+        self.frames_in = [0, 0]
+        self.bad_frames = 0
+
+    def _wake(self) -> None:
+        self._wake_event.set()
+
+    def _room(self) -> None:
+        self._room_event.set()
+
+    def _close_channel(self, number: int) -> None:
+        self._close_frames.append(number)
+        self._wake()
+
+    def backlog(self, number: int) -> int:
+        """Bytes the mux holds for the line: channel ``number``'s and, ahead of it, commands'."""
+        if number == COMMANDS:
+            return self.commands.queued
+        return self.commands.queued + self.teleop.queued
+
+    def _fail(self, exc: BaseException) -> None:
+        for ch in self._channels:
+            if ch._broken is None:
+                ch._broken = exc
+            ch._notify()
+
+    async def _writer(self) -> None:
+        try:
+            while True:
+                self._wake_event = trio.Event()
+                frame = self._next_frame()
+                if frame is None:
+                    await self._wake_event.wait()
+                    continue
+                await self._stream.send_all(frame)
+        except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+            self._fail(exc)
+
+    def _next_frame(self) -> bytes | None:
+        for ch in self._channels:  # commands first: that is the priority
+            if ch._out:
+                payload = bytes(ch._out[:MAX_FRAME])
+                del ch._out[:MAX_FRAME]
+                self.frames_out[ch.number] += 1
+                ch._notify()
+                return _HEAD.pack(ch.number, len(payload)) + payload
+        if self._close_frames:
+            return _HEAD.pack(self._close_frames.pop(0), 0)
+        return None
+
+    async def _reader(self) -> None:
+        buf = bytearray()
+        try:
+            while True:
+                while len(buf) >= _HEAD.size:
+                    number, length = _HEAD.unpack_from(buf)
+                    if number > TELEOP:
+                        # Not our framing: nothing after it can be trusted.
+                        self.bad_frames += 1
+                        raise trio.BrokenResourceError(f"mux frame for channel {number}")
+                    if len(buf) < _HEAD.size + length:
+                        break
+                    ch = self._channels[number]
+                    payload = buf[_HEAD.size : _HEAD.size + length]
+                    del buf[: _HEAD.size + length]
+                    self.frames_in[number] += 1
+                    if length == 0:
+                        ch._eof = True
+                    elif not ch._closed:
+                        ch._in += payload
+                    ch._notify()
+                while any(len(ch._in) >= MAX_UNREAD for ch in self._channels):
+                    self._room_event = trio.Event()
+                    await self._room_event.wait()  # flow control: a reader makes room
+                data = await self._stream.receive_some(MAX_FRAME + _HEAD.size)
+                if not data:
+                    for ch in self._channels:
+                        ch._eof = True
+                        ch._notify()
+                    return
+                buf += data
+        except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+            self._fail(exc)
+
+    async def run(self, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED) -> None:
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(self._reader)
+            nursery.start_soon(self._writer)
+            task_status.started()
+
+
+@contextlib.asynccontextmanager
+async def open_mux(stream: trio.abc.Stream) -> AsyncIterator[StreamMux]:
+    """``async with open_mux(stream) as mux:`` -- ``mux.commands`` and ``mux.teleop``.
+
+    Use the same on both ends.  On exit the mux stops (its channels break);
+    the underlying stream is left to its owner.
+    """
+    mux = StreamMux(stream)
+    # Entered by hand (as open_teleop's): the caller's exceptions reach it unwrapped.
+    nursery_cm = trio.open_nursery()
+    nursery = await nursery_cm.__aenter__()
+    try:
+        await nursery.start(mux.run)
+        yield mux
+    finally:
+        nursery.cancel_scope.cancel()
+        await nursery_cm.__aexit__(None, None, None)
