@@ -9,7 +9,9 @@ import sys
 
 import pytest
 
+from linksim.bench import run_bench_pty
 from linksim.cli import _bench as bench_cli
+from serialsocket.packets import EIGHT_BIT_CLEAN
 
 
 def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
@@ -78,3 +80,17 @@ def test_bench_pty_over_socket_and_loop_urls(capsys: pytest.CaptureFixture[str])
         ("loop", False),
     ]
     assert all(r["MBps"] > 0 for r in rows)
+
+
+def test_bench_pty_eight_bit_profile() -> None:
+    # Both sockets take the profile; the record names it (the 4096 run is
+    # the same code at another length, so one length keeps this fast).
+    record = run_bench_pty(size=5000, runs=1, lengths=(128,), encoding=EIGHT_BIT_CLEAN)
+    results = record["results"]
+    assert isinstance(results, list)
+    assert [(r["encoding"], r["max_packet_length"], r["bytes"]) for r in results] == [
+        ("8bit", 128, 5000)
+    ]
+    default = run_bench_pty(size=5000, runs=1, lengths=(128,))["results"]
+    assert isinstance(default, list)
+    assert default[0]["encoding"] == "printable"
