@@ -36,8 +36,9 @@ __all__ = [
     "crc32_ieee",
 ]
 
-crc16_kermit: Callable[[bytes], int] = crcmod.predefined.mkCrcFun("kermit")
-"""CRC-16/KERMIT of a byte string (crcmod's C implementation when available)."""
+crc16_kermit: Callable[..., int] = crcmod.predefined.mkCrcFun("kermit")
+"""CRC-16/KERMIT of a byte string (crcmod's C implementation when available);
+an optional second argument continues from a previous result."""
 
 
 def _raw_crc16() -> tuple[Callable[[bytes, int, bytes], int], bytes]:
@@ -49,7 +50,7 @@ def _raw_crc16() -> tuple[Callable[[bytes, int, bytes], int], bytes]:
         init, table, fun = defaults
         if callable(fun) and init == 0 and fun(b"123456789", 0, table) == 0x2189:
             return fun, table
-    return (lambda data, crc, table: crc16_kermit(data)), b""
+    return (lambda data, crc, table: crc16_kermit(data, crc)), b""
 
 
 _CRC16_FUN, _CRC16_TABLE = _raw_crc16()

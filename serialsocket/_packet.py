@@ -156,29 +156,53 @@ def build_packet(
             can carry (9024 data+check characters).
     """
     data = packet.data
-    k = 3 if check is _CRC16 else int(check)
-    field = len(data) + k
-    seq_c, type_c = packet.seq + 32, ord(packet.type)
+    if check is _CRC16:
+        # The common case: the header (MARK through HCHECK) and its CRC depend
+        # only on SEQ, TYPE and the field's length, so they are cached; the
+        # CRC then continues over the data alone.
+        key = len(data) << 14 | ord(packet.type) << 6 | packet.seq
+        head = _HEADS.get(key)
+        if head is None:
+            head = _header(packet.seq, ord(packet.type), len(data), 3)
+            if len(_HEADS) >= _HEADS_BOUND:
+                _HEADS.clear()
+            _HEADS[key] = head
+        marked, head_crc = head
+        crc = _CRC16_FUN(data, head_crc, _CRC16_TABLE)
+        c1, c2, c3 = (crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32
+        tail = bytes((c1, c2, c3)) if eol is None else bytes((c1, c2, c3, eol))
+        return b"".join((padding, marked, data, tail))
+    marked, _ = _header(packet.seq, ord(packet.type), len(data), int(check))
+    covered = marked[1:] + data
+    tail = check_chars(check, covered)
+    if eol is not None:
+        tail += bytes((eol,))
+    return b"".join((padding, marked, data, tail))
+
+
+_HEADS: dict[int, tuple[bytes, int]] = {}
+_HEADS_BOUND = 4096
+"""Cached CRC-16 headers: 64 sequence numbers times the few (type, length)
+pairs a sender uses -- a few hundred in practice; cleared when full."""
+
+
+def _header(seq: int, type_c: int, data_length: int, check_length: int) -> tuple[bytes, int]:
+    """MARK through HCHECK for this packet, and the CRC-16 of its LEN..HCHECK.
+
+    Raises:
+        LocalProtocolError: the field is larger than an extended packet carries.
+    """
+    field = data_length + check_length
+    seq_c = seq + 32
     if field + 2 <= MAX_NORMAL_LEN:
-        covered = bytes((field + 34, seq_c, type_c)) + data
+        head = bytes((field + 34, seq_c, type_c))
     elif field <= MAX_EXTENDED_FIELD:
         lenx1, lenx2 = field // 95, field % 95
         s = 32 + seq_c + type_c + lenx1 + lenx2 + 64
         hcheck = ((s + ((s & 0xC0) >> 6)) & 0x3F) + 32  # type 1 over LEN..LENX2
-        covered = bytes((32, seq_c, type_c, lenx1 + 32, lenx2 + 32, hcheck)) + data
+        head = bytes((32, seq_c, type_c, lenx1 + 32, lenx2 + 32, hcheck))
     else:
         raise LocalProtocolError(
-            f"data field of {len(data)} characters exceeds the Kermit maximum packet"
+            f"data field of {data_length} characters exceeds the Kermit maximum packet"
         )
-    if k == 3:
-        # CRC-16 inline (as check_chars computes it): the common case, once per packet.
-        crc = _CRC16_FUN(covered, 0, _CRC16_TABLE)
-        c1, c2, c3 = (crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32
-        tail = bytes((c1, c2, c3)) if eol is None else bytes((c1, c2, c3, eol))
-    else:
-        tail = check_chars(check, covered)
-        if eol is not None:
-            tail += bytes((eol,))
-    if padding:
-        return b"".join((padding, b"\x01", covered, tail))
-    return b"\x01" + covered + tail
+    return b"\x01" + head, _CRC16_FUN(head, 0, _CRC16_TABLE)
