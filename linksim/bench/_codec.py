@@ -106,10 +106,11 @@ def _packetize(data: bytes, enc: _FieldCodec, max_len: int) -> bytes:
     wire: list[bytes] = []
     append = wire.append
     at = seq = 0
+    data_type = PacketType.DATA  # (an Enum member lookup costs ~0.2 us in Python 3.11)
     while at < len(data):
         # A sender fills a window at a time: 31 packets, Kermit's largest window.
         for field, used in enc.encode_fields(view[at:], cap, 31):
-            append(build_packet(Packet(seq=seq, type=PacketType.DATA, data=field)))
+            append(build_packet(Packet(seq=seq, type=data_type, data=field)))
             at += used
             seq = (seq + 1) & 63
     return b"".join(wire)
