@@ -418,9 +418,9 @@ class Radix91Encoding:
         r = _TAIL_BYTES.get(rest)
         if r is None:
             raise _malformed(f"length {len(raw)} is not a radix-91 field length")
-        digit_bytes = raw.translate(_DIGIT_OF)
-        if digit_bytes and max(digit_bytes) >= 91:
+        if raw.translate(None, RADIX91_ALPHABET):
             raise _malformed("character outside the radix-91 alphabet")
+        digit_bytes = raw.translate(_DIGIT_OF)
         parts: list[bytes] = []
         if q and q >= _SMALL_FIELD_BLOCKS:
             digits = np.frombuffer(digit_bytes, np.uint8, q * _BLOCK_CHARS)
@@ -516,9 +516,10 @@ class Radix91Encoding:
         if r is None:
             raise _malformed(f"length {length} is not a radix-91 field length")
         m = len(fields)
-        digits = np.frombuffer(b"".join(fields).translate(_DIGIT_OF), np.uint8)
-        if int(digits.max()) >= 91:
+        joined = b"".join(fields)
+        if joined.translate(None, RADIX91_ALPHABET):
             raise _malformed("character outside the radix-91 alphabet")
+        digits = np.frombuffer(joined.translate(_DIGIT_OF), np.uint8)
         rows = digits.reshape(m, length)
         parts = []
         if q:
