@@ -87,6 +87,19 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
         help="press the emergency stop this many seconds into the script",
     )
     ap.add_argument(
+        "--stop-via",
+        choices=["teleop", "command"],
+        default="teleop",
+        help="--stop-at sends the sample channel's STOP (default) or the command session's "
+        "EMERGENCY_STOP (implies --with-commands)",
+    )
+    ap.add_argument(
+        "--with-commands",
+        action="store_true",
+        help="run the command session beside the sample channel on the same line (the "
+        "stream mux: commands first)",
+    )
+    ap.add_argument(
         "--no-force-stop",
         action="store_true",
         help="let contact force pass the limit without stopping the arm (to watch it oscillate)",
@@ -157,6 +170,8 @@ def teleop_main(args: argparse.Namespace) -> int:
         stop_at=args.stop_at,
         force_stop=not args.no_force_stop,
         real=not args.virtual,
+        commands=args.with_commands or args.stop_via == "command",
+        stop_via=args.stop_via,
         duration=args.duration,
     )
     if args.compare_plot:

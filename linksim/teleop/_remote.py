@@ -113,6 +113,9 @@ class RemoteStatistics:
     joint_limit_hits: int = 0
     emergency_stops: int = 0
     samples_after_stop: int = 0
+    """Samples that arrived after the stop (ignored)."""
+    moved_after_stop: float = 0.0
+    """The farthest the hand went from where the stop caught it (m)."""
 
 
 def _dh(a: float, alpha: float, d: float, theta: float) -> Array:
@@ -186,6 +189,7 @@ class RemoteArm:
         self.last: Sample | None = None
         self.last_arrival: float | None = None
         self.stopped = False
+        self._stopped_at = self.p.copy()
         self.wrench = contact.wrench(self.p, self.v, self._wrist())
         self.stats = RemoteStatistics()
 
@@ -204,6 +208,7 @@ class RemoteArm:
         """STOP (or the command session's emergency stop): hold here for good."""
         if not self.stopped:
             self.stats.emergency_stops += 1
+            self._stopped_at = self.p.copy()
         self.stopped = True
         self._hold()
 
@@ -292,6 +297,9 @@ class RemoteArm:
         else:
             self._cartesian_tick(dt)
         self._contact_tick(now)
+        if self.stopped:
+            moved = float(np.linalg.norm(self.p - self._stopped_at))
+            self.stats.moved_after_stop = max(self.stats.moved_after_stop, moved)
         return self._reply(now)
 
     def _joint_tick(self, dt: float) -> None:

@@ -28,29 +28,41 @@ from linksim.link import (
     LinkConfig,
     endpoint_config_for,
     open_impaired_link,
+    rtt_hint_for,
     run_relay,
     serial_socket_pair,
 )
 from serialsocket import SerialSocket, accept, connect, open_port
+from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream
+from tcpstream.commands import emergency_stop
 from tcpstream.teleop import (
+    TELEOP,
     Backlog,
     ContactFlags,
     Reply,
     ReplyStatus,
     Sample,
+    StreamMux,
     TeleopArm,
     TeleopMode,
     TeleopRefused,
+    open_mux,
     open_teleop,
 )
 
 from ._contact import ContactModel, Hole
+from ._executor import TeleopExecutor
 from ._operator import Operator, Script, peg_script, surface_script
 from ._remote import RemoteArm, RemoteConfig, rate_deadman
 
 __all__ = ["TeleopOptions", "TeleopReport", "run_teleop", "run_teleop_loopback"]
 
 IDENTITY = "teleop-operator"
+STOP_SETTLE = 0.005
+"""m: how far the hand may coast while the servo settles after a stop."""
+COMMAND_HEARTBEAT = 10.0
+"""s: the command session's heartbeat beside a sample stream (samples show the line
+is alive; at 2400 bit/s a 216-byte heartbeat takes 1.6 s of line)."""
 SAMPLE_RATE = 104.0
 """Hz: seed 004's closed loop ("approximately 104 Hz")."""
 CONTROL_RATE = 125.0
@@ -76,6 +88,11 @@ class TeleopOptions:
     force_stop: bool = True
     real: bool = False
     """Serial only: real ptys joined by the impaired relay, on the wall clock."""
+    commands: bool = False
+    """Run the command session beside the sample channel, on the same line (the mux)."""
+    stop_via: str = "teleop"
+    """Where ``stop_at`` sends the emergency stop: the sample channel's STOP ("teleop")
+    or the command session's EMERGENCY_STOP ("command", needs ``commands``)."""
     duration: float | None = None
     """Script seconds to run (default: the script, then the line's round trip and 1 s)."""
     timeout: float = 600.0
@@ -103,6 +120,7 @@ class TeleopReport:
     force_limit_stops: int
     emergency_stops: int
     samples_after_stop: int
+    moved_after_stop_m: float
     bounces: int
     pose_changes: int
     deadman_trips: int
@@ -235,6 +253,49 @@ async def _pty_pair(link: LinkConfig) -> AsyncIterator[tuple[SerialSocket, Seria
             stop.set()
 
 
+Probe = Callable[[], Backlog] | None
+
+
+def _with_mux(mux: StreamMux, inner: Probe) -> Callable[[], Backlog]:
+    """The sample channel's backlog through the mux: the mux's bytes ahead of it (commands
+    first) plus the transport's own figures."""
+
+    def probe() -> Backlog:
+        below = inner() if inner is not None else Backlog(0)
+        return Backlog(below.queued_bytes + mux.backlog(TELEOP), below.line_seconds)
+
+    return probe
+
+
+@contextlib.asynccontextmanager
+async def _channels(
+    options: TeleopOptions, link: LinkConfig
+) -> AsyncIterator[
+    tuple[
+        trio.abc.Stream,
+        trio.abc.Stream,
+        Probe,
+        Probe,
+        trio.abc.Stream | None,
+        trio.abc.Stream | None,
+    ]
+]:
+    """(operator's sample stream, arm's, their probes, operator's command stream, arm's)."""
+    async with _streams(options, link) as (ctl, arm, ctl_probe, arm_probe):
+        if not options.commands:
+            yield ctl, arm, ctl_probe, arm_probe, None, None
+            return
+        async with open_mux(ctl) as ctl_mux, open_mux(arm) as arm_mux:
+            yield (
+                ctl_mux.teleop,
+                arm_mux.teleop,
+                _with_mux(ctl_mux, ctl_probe),
+                _with_mux(arm_mux, arm_probe),
+                ctl_mux.commands,
+                arm_mux.commands,
+            )
+
+
 def _line_interval(link: LinkConfig) -> float:
     """Seconds one sample takes on the line (prefix-encoded), or one sampling interval."""
     d = link.a_to_b
@@ -279,25 +340,57 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
         on_stop=on_stop,
         nonce_source=rng.randbytes,
     )
+    executor = TeleopExecutor(remote, on_stop)
     error: str | None = None
     op_stats = None
     start = trio.current_time()
     with trio.move_on_after(options.timeout) as scope:
         async with (
-            _streams(options, link) as (ctl, arm_stream, ctl_backlog, arm_backlog),
+            _channels(options, link) as (
+                ctl,
+                arm_stream,
+                ctl_backlog,
+                arm_backlog,
+                ctl_cmd,
+                arm_cmd,
+            ),
             trio.open_nursery() as nursery,
         ):
             nursery.start_soon(lambda: arm_end.serve_stream(arm_stream, backlog=arm_backlog))
             nursery.start_soon(_arm_loop, arm_end, remote)
             try:
-                async with open_teleop(
-                    ctl,
-                    identity=IDENTITY,
-                    key=options.key,
-                    backlog=ctl_backlog,
-                    on_reply=operator.on_reply,
-                    nonce_source=rng.randbytes,
-                ) as op:
+                async with contextlib.AsyncExitStack() as stack:
+                    client: ArmClient | None = None
+                    if ctl_cmd is not None and arm_cmd is not None:
+                        server_cfg = ServerConfig(
+                            key=options.key,
+                            rtt_hint=rtt_hint_for(link),
+                            heartbeat_interval=COMMAND_HEARTBEAT,
+                            # The samples' replies carry the state: telemetry every 10 s.
+                            telemetry_every=int(CONTROL_RATE * COMMAND_HEARTBEAT),
+                            nonce_source=rng.randbytes,
+                        )
+                        server = await stack.enter_async_context(Server(executor, server_cfg))
+                        nursery.start_soon(server.serve_stream, arm_cmd)
+                        client = await stack.enter_async_context(
+                            connect_stream(
+                                ctl_cmd,
+                                identity=IDENTITY,
+                                key=options.key,
+                                incarnation=rng.getrandbits(64),
+                                nonce_source=rng.randbytes,
+                            )
+                        )
+                    op = await stack.enter_async_context(
+                        open_teleop(
+                            ctl,
+                            identity=IDENTITY,
+                            key=options.key,
+                            backlog=ctl_backlog,
+                            on_reply=operator.on_reply,
+                            nonce_source=rng.randbytes,
+                        )
+                    )
                     t0 = trio.current_time()
                     dt = 1.0 / SAMPLE_RATE
                     k = 0
@@ -307,14 +400,18 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                         stop = options.stop_at
                         if stop is not None and stop_sent is None and now - t0 >= stop:
                             stop_sent = now
-                            op.emergency_stop()
+                            if options.stop_via == "command" and client is not None:
+                                nursery.start_soon(client.submit, emergency_stop())
+                            else:
+                                op.emergency_stop()
                         if stop_sent is None:
                             op.submit(operator.sample(now - t0, dt, stamp=now))
                         k += 1
                     # Let the last sample and its reply cross the line before counting.
                     await trio.sleep(2 * one_way + 2 * _line_interval(link) + 0.1)
                     op_stats = op.statistics()
-            except TeleopRefused as exc:
+                    executor.armed = False  # the session's end halts the arm: not a stop
+            except (TeleopRefused, SessionError) as exc:
                 error = str(exc)
             nursery.cancel_scope.cancel()
     if scope.cancelled_caught:
@@ -369,7 +466,9 @@ def _report(
     if options.scheme == "shared-compliance":
         ok = ok and st.max_force <= limit
     if options.stop_at is not None:
-        ok = ok and st.emergency_stops == 1 and st.samples_after_stop == 0
+        # Stopped, and nothing moved it afterwards (samples still on the way are ignored)
+        # beyond the servo settling where the stop caught it (a few mm at 0.1 m/s).
+        ok = ok and st.emergency_stops == 1 and st.moved_after_stop < STOP_SETTLE
     return TeleopReport(
         ok=ok,
         mode=options.mode.name.lower(),
@@ -395,6 +494,7 @@ def _report(
         force_limit_stops=st.force_limit_stops,
         emergency_stops=st.emergency_stops,
         samples_after_stop=st.samples_after_stop,
+        moved_after_stop_m=st.moved_after_stop,
         bounces=st.bounces,
         pose_changes=st.pose_changes,
         deadman_trips=st.deadman_trips,

@@ -250,6 +250,22 @@ def test_emergency_stop_during_streaming_overtakes_every_sample(preset: str, bou
     assert 1.3 < r.stop_to_arm_s < bound
 
 
+def test_command_session_emergency_stop_beside_the_samples_on_one_line() -> None:
+    """The command session and the sample channel share the moon line through the mux;
+    the session's EMERGENCY_STOP overtakes the samples and halts the arm."""
+    r = run_virtual(
+        run_teleop,
+        TeleopOptions(
+            task="surface", preset="moon", stop_at=5.0, commands=True, stop_via="command"
+        ),
+    )
+    assert r.ok
+    assert r.emergency_stops == 1
+    assert r.stop_to_arm_s is not None
+    assert 1.3 < r.stop_to_arm_s < 1.3 + 0.3
+    assert r.moved_after_stop_m < 0.005
+
+
 def test_tcp_clean_every_sample_applied_within_a_control_tick() -> None:
     r = run_virtual(run_teleop, TeleopOptions(transport="tcp", preset="clean", duration=3.0))
     assert r.ok
