@@ -113,6 +113,13 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--json", action="store_true", help="print the report as one JSON object")
     ap.add_argument(
+        "--live",
+        action="store_true",
+        help="the teleoperation view on stderr: mode and buttons, force/torque bars, predicted "
+        "vs confirmed hand, setpoint age, the link (redrawn on a terminal; the final view "
+        "otherwise)",
+    )
+    ap.add_argument(
         "--compare-plot",
         metavar="FILE",
         help="run the task under shared compliance, direct force reflection and direct force "
@@ -170,6 +177,7 @@ def teleop_main(args: argparse.Namespace) -> int:
         stop_at=args.stop_at,
         force_stop=not args.no_force_stop,
         real=not args.virtual,
+        live=args.live,
         commands=args.with_commands or args.stop_via == "command",
         stop_via=args.stop_via,
         duration=args.duration,

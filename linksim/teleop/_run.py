@@ -12,9 +12,11 @@ on the wall clock (the latency benchmark).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import math
 import random
+import sys
 from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -38,6 +40,7 @@ from tcpstream.commands import emergency_stop
 from tcpstream.teleop import (
     TELEOP,
     Backlog,
+    ChannelStatistics,
     ContactFlags,
     Reply,
     ReplyStatus,
@@ -53,7 +56,8 @@ from tcpstream.teleop import (
 from ._contact import ContactModel, Hole
 from ._executor import TeleopExecutor
 from ._operator import Operator, Script, peg_script, surface_script
-from ._remote import RemoteArm, RemoteConfig, rate_deadman
+from ._remote import RemoteArm, RemoteConfig, rate_deadman, rotation
+from ._view import LiveView, ViewState, render
 
 __all__ = ["TeleopOptions", "TeleopReport", "run_teleop", "run_teleop_loopback"]
 
@@ -88,6 +92,8 @@ class TeleopOptions:
     force_stop: bool = True
     real: bool = False
     """Serial only: real ptys joined by the impaired relay, on the wall clock."""
+    live: bool = False
+    """Show the teleoperation view on stderr while the run goes (a terminal only)."""
     commands: bool = False
     """Run the command session beside the sample channel, on the same line (the mux)."""
     stop_via: str = "teleop"
@@ -341,8 +347,11 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
         nonce_source=rng.randbytes,
     )
     executor = TeleopExecutor(remote, on_stop)
+    view = _ViewFeed(operator, remote.config.force_limit, one_way)
+    live = LiveView()
     error: str | None = None
     op_stats = None
+    final_view: ViewState | None = None
     start = trio.current_time()
     with trio.move_on_after(options.timeout) as scope:
         async with (
@@ -387,7 +396,7 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                             identity=IDENTITY,
                             key=options.key,
                             backlog=ctl_backlog,
-                            on_reply=operator.on_reply,
+                            on_reply=view.on_reply,
                             nonce_source=rng.randbytes,
                         )
                     )
@@ -405,17 +414,23 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                             else:
                                 op.emergency_stop()
                         if stop_sent is None:
-                            op.submit(operator.sample(now - t0, dt, stamp=now))
+                            view.sample = operator.sample(now - t0, dt, stamp=now)
+                            op.submit(view.sample)
+                        if options.live and k % LIVE_EVERY == 0:
+                            live.draw(view.state(now, op.statistics()))
                         k += 1
                     # Let the last sample and its reply cross the line before counting.
                     await trio.sleep(2 * one_way + 2 * _line_interval(link) + 0.1)
                     op_stats = op.statistics()
+                    final_view = view.state(trio.current_time(), op_stats)
                     executor.armed = False  # the session's end halts the arm: not a stop
             except (TeleopRefused, SessionError) as exc:
                 error = str(exc)
             nursery.cancel_scope.cancel()
     if scope.cancelled_caught:
         error = f"the run did not finish within {options.timeout:g} s"
+    if options.live and final_view is not None and not live.enabled:
+        print("\n".join(render(final_view)), file=sys.stderr)
     return _report(
         options,
         remote,
@@ -428,6 +443,50 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
         error,
         None if stop_sent is None or not stop_arrived else stop_arrived[0] - stop_sent,
     )
+
+
+LIVE_EVERY = 26
+"""Samples between redraws of the live view: four a second."""
+
+
+class _ViewFeed:
+    """What the live view shows, gathered as the run goes."""
+
+    def __init__(self, operator: Operator, force_limit: float, one_way: float) -> None:
+        self.operator = operator
+        self.force_limit = force_limit
+        self.one_way = one_way
+        self.sample: Sample | None = None
+        self.reply: Reply | None = None
+        self.reply_at: float | None = None
+        self._origin: tuple[float, float, float] | None = None
+
+    def on_reply(self, reply: Reply, now: float) -> None:
+        self.operator.on_reply(reply, now)
+        if self._origin is None and reply.sample == 0:
+            self._origin = (reply.actual[0], reply.actual[1], reply.actual[2])
+        self.reply, self.reply_at = reply, now
+
+    def predicted(self) -> tuple[float, float, float] | None:
+        """The hand where the operator's own increments put it (Cartesian modes)."""
+        if self._origin is None or self.operator.mode in (TeleopMode.JOINT, TeleopMode.RATE):
+            return None
+        r = rotation(np.array(self.operator.hand_to_robot))
+        d = r @ self.operator.sums[:3]
+        o = self._origin
+        return (o[0] + float(d[0]), o[1] + float(d[1]), o[2] + float(d[2]))
+
+    def state(self, now: float, channel: ChannelStatistics | None) -> ViewState:
+        return ViewState(
+            now=now,
+            sample=self.sample,
+            reply=self.reply,
+            reply_at=self.reply_at,
+            predicted=self.predicted(),
+            channel=channel,
+            force_limit=self.force_limit,
+            one_way_delay=self.one_way,
+        )
 
 
 async def _arm_loop(arm_end: TeleopArm, remote: RemoteArm) -> None:
@@ -516,6 +575,7 @@ async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> di
     """
     applied: list[float] = []
     numbers: list[int] = []
+    kinematics: list[float] = []
     arm_end: TeleopArm
 
     def on_sample(sample: Sample, arrived: float) -> None:
@@ -556,7 +616,12 @@ async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> di
             for k in range(n):
                 await trio.sleep_until(t0 + k * dt)
                 now = trio.current_time()
-                op.submit(operator.sample((now - t0) % 13.0, dt, stamp=now))
+                # The FRHC's kinematics (seed 004's KIN stage) run first; the stamp is
+                # when the sample is ready to go: the channel's latency is measured.
+                sample = operator.sample((now - t0) % 13.0, dt, stamp=now)
+                ready = trio.current_time()
+                kinematics.append(ready - now)
+                op.submit(dataclasses.replace(sample, stamp=ready))
             await trio.sleep(0.1)
             stats = op.statistics()
         nursery.cancel_scope.cancel()
@@ -568,6 +633,10 @@ async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> di
         "samples_coalesced": stats.samples_coalesced,
         "samples_applied": len(numbers),
         "every_sample_applied": numbers == list(range(1, operator.sampled + 1)),
+        "operator_kinematics_s": {
+            "p50": _percentile(kinematics, 50),
+            "p99": _percentile(kinematics, 99),
+        },
         "latency_s": {
             "p50": _percentile(applied, 50),
             "p99": _percentile(applied, 99),
