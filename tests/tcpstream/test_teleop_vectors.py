@@ -1,4 +1,4 @@
-"""PROTOCOL.md section 14.6 holds exactly the teleoperation bytes the code produces,
+"""PROTOCOL.md section 14.7 holds exactly the teleoperation bytes the code produces,
 and those bytes follow the document's formulas when recomputed without the code.
 
 Regenerate the section's block with ``python -m tests.tcpstream.test_teleop_vectors``.
