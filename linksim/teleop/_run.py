@@ -132,6 +132,8 @@ class TeleopReport:
     deadman_trips: int
     rate_deadman_s: float
     replies_received: int
+    line_queue_max_s: float | None
+    """Serial: the most line time ever committed ahead of a sample (no queue grows)."""
     stop_to_arm_s: float | None
     seconds: float
     error: str | None = None
@@ -186,6 +188,9 @@ class _SerialFigures:
         self._out = 0
         self._line = 0.0
         self._at = trio.current_time()
+        self.max_line = 0.0
+        """The most line time (s) ever committed ahead of a sample: no queue grows."""
+        self.max_queued = 0
 
     def __call__(self) -> Backlog:
         st = self._sock.statistics()
@@ -193,26 +198,25 @@ class _SerialFigures:
         self._line = max(0.0, self._line - (now - self._at))
         self._line += (st.port_bytes_out - self._out) * self._char_time
         self._out, self._at = st.port_bytes_out, now
+        self.max_line = max(self.max_line, self._line)
+        self.max_queued = max(self.max_queued, st.link.bytes_queued)
         return Backlog(st.link.bytes_queued, max(0.0, self._line - self._slack))
 
 
 @contextlib.asynccontextmanager
 async def _streams(
-    options: TeleopOptions, link: LinkConfig
+    options: TeleopOptions, link: LinkConfig, holder: dict[str, _SerialFigures]
 ) -> AsyncIterator[
     tuple[
         trio.abc.Stream, trio.abc.Stream, Callable[[], Backlog] | None, Callable[[], Backlog] | None
     ]
 ]:
-    if options.transport == "serial" and options.real:
-        async with _pty_pair(link) as (ctl, arm):
-            slack, char = _line_interval(link), link.a_to_b.char_time
-            yield ctl, arm, _SerialFigures(ctl, char, 0.0), _SerialFigures(arm, char, slack)
-        return
     if options.transport == "serial":
-        async with serial_socket_pair(link) as (ctl, arm):
+        pair = _pty_pair(link) if options.real else serial_socket_pair(link)
+        async with pair as (ctl, arm):
             slack, char = _line_interval(link), link.a_to_b.char_time
-            yield ctl, arm, _SerialFigures(ctl, char, 0.0), _SerialFigures(arm, char, slack)
+            holder["operator"] = _SerialFigures(ctl, char, 0.0)
+            yield ctl, arm, holder["operator"], _SerialFigures(arm, char, slack)
         return
     d = link.a_to_b
     line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
@@ -275,7 +279,7 @@ def _with_mux(mux: StreamMux, inner: Probe) -> Callable[[], Backlog]:
 
 @contextlib.asynccontextmanager
 async def _channels(
-    options: TeleopOptions, link: LinkConfig
+    options: TeleopOptions, link: LinkConfig, holder: dict[str, _SerialFigures]
 ) -> AsyncIterator[
     tuple[
         trio.abc.Stream,
@@ -287,7 +291,7 @@ async def _channels(
     ]
 ]:
     """(operator's sample stream, arm's, their probes, operator's command stream, arm's)."""
-    async with _streams(options, link) as (ctl, arm, ctl_probe, arm_probe):
+    async with _streams(options, link, holder) as (ctl, arm, ctl_probe, arm_probe):
         if not options.commands:
             yield ctl, arm, ctl_probe, arm_probe, None, None
             return
@@ -352,10 +356,11 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
     error: str | None = None
     op_stats = None
     final_view: ViewState | None = None
+    figures: dict[str, _SerialFigures] = {}
     start = trio.current_time()
     with trio.move_on_after(options.timeout) as scope:
         async with (
-            _channels(options, link) as (
+            _channels(options, link, figures) as (
                 ctl,
                 arm_stream,
                 ctl_backlog,
@@ -442,6 +447,7 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
         start,
         error,
         None if stop_sent is None or not stop_arrived else stop_arrived[0] - stop_sent,
+        figures.get("operator"),
     )
 
 
@@ -513,6 +519,7 @@ def _report(
     start: float,
     error: str | None,
     stop_to_arm: float | None,
+    line: _SerialFigures | None = None,
 ) -> TeleopReport:
     st = remote.stats
     ages = st.ages
@@ -559,6 +566,7 @@ def _report(
         deadman_trips=st.deadman_trips,
         rate_deadman_s=deadman,
         replies_received=replies,
+        line_queue_max_s=None if line is None else line.max_line,
         stop_to_arm_s=stop_to_arm,
         seconds=trio.current_time() - start,
         error=error,

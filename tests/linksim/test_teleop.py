@@ -106,6 +106,33 @@ def test_tool_frame_increments_follow_the_hand() -> None:
     np.testing.assert_allclose(a.p - p0, 0.01 * approach, atol=1e-4)
 
 
+def test_a_moving_base_turns_the_transformation() -> None:
+    """The robot's base turns at 0.5 rad/s about z: the same hand increment moves the arm
+    along a direction that turns with it (seed 004: the 6x6 matrix is then not constant)."""
+    a = arm(base_rate=0.5)
+    now = 0.0
+    moves = []
+    for n, t in enumerate((0.0, math.pi), start=1):
+        while now < t:
+            now += DT
+            a.step(now, None)
+        before = a.p_cmd.copy()
+        now += DT
+        a.step(now, (Sample(n, TeleopMode.CARTESIAN, E, 0, now, six(0.001 * n)), now))
+        moves.append(a.p_cmd - before)
+    # 1 mm along hand x at t = 0, then at t = pi s the base has turned by -pi/2.
+    np.testing.assert_allclose(moves[0], [0.001, 0.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(moves[1], [0.0, -0.001, 0.0], atol=2e-5)
+
+
+def test_the_trigger_drives_the_gripper() -> None:
+    a = arm()
+    s = [Sample(n, TeleopMode.CARTESIAN, E, 255, 0.0, six(0.0)) for n in range(1, 3)]
+    run(a, s, 40)
+    reply = a.step(1.0, None)
+    assert reply.gripper == 255
+
+
 def test_joint_mode_moves_joints_by_the_scaled_increments() -> None:
     a = arm(joint_scale=(0.5, 1.0, 2.0, 1.0, 1.0, 1.0))
     q0 = a.q.copy()
@@ -228,6 +255,10 @@ def test_noisy_moon_shared_compliance_surface_run() -> None:
     assert r.samples_sent + r.samples_coalesced == r.samples_sampled
     # The age at execution stays near the one-way delay (1.3 s) plus one sample's line time.
     assert 1.3 < r.setpoint_age_s["p50"] < 1.8
+    # No queue grows: never more than one sample's line time (0.40 s) plus an ACK or a
+    # retransmission ahead of a sample.
+    assert r.line_queue_max_s is not None
+    assert r.line_queue_max_s < 1.0
 
 
 def test_noisy_moon_force_reflection_surface_run_exceeds_the_limit() -> None:
