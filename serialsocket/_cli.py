@@ -138,7 +138,9 @@ def _build() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser
     retype(con, _NETCAT_TYPES | {"connect_timeout": SECONDS})
     _same_spellings(con)
     ker = sub.add_parser(
-        "kermit", help="Kermit file transfer with C-Kermit, G-Kermit or ours (send, receive)"
+        "kermit",
+        help="Kermit file transfer with C-Kermit, G-Kermit or ours "
+        "(send, receive, server, get, remote)",
     )
     add_kermit_arguments(ker)
     return ap, {"encode": enc, "decode": dec, "listen": lis, "connect": con, "kermit": ker}
