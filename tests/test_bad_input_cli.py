@@ -81,7 +81,7 @@ SERIAL_CASES = [
         ["connect", "--max-len", "100000", "/dev/null"],
         b"",
         2,
-        "argument --max-len: must be an integer in 33..9031",
+        "argument --max-len: must be an integer in 37..9031",
     ),
     (["connect", "bogus://x"], b"", 2, "argument PORT: unknown URL scheme 'bogus'"),
     (["connect", "/nonexistent/port"], b"", 1, "/nonexistent/port"),
@@ -577,6 +577,8 @@ RUNTIME_CASES = [
     ),
     (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/null"], 1, "both", False),
     (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/zero"], 1, "terminal", False),
+    (["linksim", "teleop", "--virtual", "--key-file", "/nonexistent"], 2, "nonexistent", False),
+    (["linksim", "teleop", "--transport", "tcp"], 2, "--virtual", False),
 ]
 
 

@@ -142,7 +142,11 @@ def _summary(r: TeleopReport) -> str:
 
 def teleop_main(args: argparse.Namespace) -> int:
     """Run, print, exit 0 when the report says ok."""
-    key = read_key(args.key_file) if args.key_file else None
+    try:
+        key = read_key(args.key_file) if args.key_file else None
+    except (OSError, ValueError) as exc:
+        print(f"linksim teleop: {exc}", file=sys.stderr)
+        return 2
     if args.transport == "loopback":
         result: dict[str, Any] = trio.run(
             lambda: run_teleop_loopback(args.duration or 60.0, key=key)
@@ -184,7 +188,11 @@ def teleop_main(args: argparse.Namespace) -> int:
     )
     if args.compare_plot:
         return _compare(options, args.compare_plot, args.json)
-    report = run_virtual(run_teleop, options) if args.virtual else trio.run(run_teleop, options)
+    try:
+        report = run_virtual(run_teleop, options) if args.virtual else trio.run(run_teleop, options)
+    except OSError as exc:  # the ptys or the line could not be opened
+        print(f"linksim teleop: {exc}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(report.to_json()))
     else:
