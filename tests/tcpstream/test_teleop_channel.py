@@ -357,3 +357,39 @@ async def _busy() -> None:
 
 def test_a_second_operator_is_refused_busy() -> None:
     trio.run(_busy, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+def test_over_tls_keyed() -> None:
+    """The channel over TLS (trio.SSLStream, trustme's CA) on an in-memory transport."""
+    import ssl
+
+    import trustme
+
+    ca = trustme.CA()
+    server_ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    ca.issue_cert("localhost").configure_cert(server_ctx)
+    client_ctx = ssl.create_default_context()
+    ca.configure_trust(client_ctx)
+
+    async def main() -> list[int]:
+        a, b = trio.testing.memory_stream_pair()
+        op_tls = trio.SSLStream(a, client_ctx, server_hostname="localhost")
+        arm_tls = trio.SSLStream(b, server_ctx, server_side=True)
+        got: list[int] = []
+
+        def on_sample(s: Sample, _now: float) -> None:
+            got.append(s.sample)
+            arm.reply(reply(s.sample))  # the replies open the operator's window
+
+        arm = TeleopArm(key=KEY, rate_deadman=1.0, control_rate=125.0, on_sample=on_sample)
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(arm.serve_stream, arm_tls)
+            async with open_teleop(op_tls, identity="op", key=KEY) as op:
+                for n in range(1, 53):
+                    op.submit(sample(n))
+                    await trio.sleep(1 / 104)
+                await trio.sleep(0.1)
+            nursery.cancel_scope.cancel()
+        return got
+
+    assert trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0)) == list(range(1, 53))
