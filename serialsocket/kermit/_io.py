@@ -19,6 +19,7 @@ file's Z acknowledged (sending) or received in order after all its data
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import logging
 import math
@@ -29,6 +30,8 @@ from collections.abc import Callable, Sequence
 from typing import BinaryIO
 
 import trio
+
+from serialsocket._socket import SerialSocket
 
 from ._attributes import AttributeReply, FileAttributes
 from ._core import (
@@ -73,6 +76,15 @@ class KermitTransferError(Exception):
         super().__init__(message)
         self.by_peer = by_peer
         self.statistics = statistics
+
+
+def _for_port(config: KermitConfig | None, port: trio.abc.Stream) -> KermitConfig:
+    """``config`` (default: KermitConfig()) with streaming decided from the port when
+    it is None: a serial socket is a reliable transport (C-Kermit's SET RELIABLE AUTO)."""
+    config = config or KermitConfig()
+    if config.streaming is None:
+        config = dataclasses.replace(config, streaming=isinstance(port, SerialSocket))
+    return config
 
 
 def safe_file_name(name: str) -> str:
@@ -169,7 +181,7 @@ async def kermit_send(
             how many files the receiver confirmed and how many bytes it
             acknowledged, left unacknowledged in flight, or never got.
     """
-    config = config or KermitConfig()
+    config = _for_port(config, port)
     handles: list[BinaryIO] = []
     try:
         files = []
@@ -251,7 +263,7 @@ async def kermit_receive(
             the sender discarded a file; the message says how many files were
             stored.
     """
-    config = config or KermitConfig()
+    config = _for_port(config, port)
     target = pathlib.Path(directory)
     if not target.is_dir():
         raise NotADirectoryError(f"{target} is not a directory: create it or pick another")

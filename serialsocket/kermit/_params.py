@@ -112,7 +112,11 @@ class KermitConfig:
             offer streaming (WHATAMI bit 8, C-Kermit's SET STREAMING ON /
             SET RELIABLE ON).  Used only when the peer offers it too; then D
             packets are not acknowledged and any transmission error ends the
-            transfer, as in C-Kermit.  Never on a raw, impaired line.
+            transfer, as in C-Kermit.  Never on a raw, impaired line.  None
+            (the default): :func:`kermit_send` / :func:`kermit_receive` decide
+            from the port -- on for a :class:`serialsocket.SerialSocket`,
+            off otherwise (C-Kermit's SET RELIABLE AUTO); the machines take
+            None as off.
         force3: FORCE-3 (C-Kermit's SET BLOCK-CHECK 5): CHKT ``5`` and a
             CRC-16 on every packet, S and its ACK included.  A receiver
             answers a FORCE-3 S this way whatever this says.
@@ -142,7 +146,7 @@ class KermitConfig:
     rate: int | None = None
     dynamic_length: bool = True
     force3: bool = False
-    streaming: bool = False
+    streaming: bool | None = None
     recovery: bool = True
     resend: bool = False
     text: bool = False
@@ -226,7 +230,7 @@ class KermitInit:
             window=config.window,
             recovery=config.recovery and config.attributes,
             force3=config.force3,
-            streaming=config.streaming,
+            streaming=bool(config.streaming),
         )
 
     def encode(self) -> bytes:

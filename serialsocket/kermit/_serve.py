@@ -24,7 +24,7 @@ import trio
 
 from ._attributes import AttributeReply, FileAttributes
 from ._core import FileCompleted, FileStarted, KermitStatistics, OutgoingFile, TransferFailed
-from ._io import _DATE_FORMAT, _READ_SIZE, _Store, kermit_receive
+from ._io import _DATE_FORMAT, _READ_SIZE, _for_port, _Store, kermit_receive
 from ._params import KermitConfig
 from ._server import (
     KermitServer,
@@ -165,7 +165,7 @@ async def kermit_server(
         trio.BrokenResourceError: the port failed.
         EOFError: the port closed before FINISH or BYE.
     """
-    config = config or KermitConfig()
+    config = _for_port(config, port)
     root = pathlib.Path(directory)
     if not root.is_dir():
         raise NotADirectoryError(f"{root} is not a directory: create it or pick another")

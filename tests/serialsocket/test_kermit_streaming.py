@@ -97,5 +97,14 @@ def test_streaming_beats_small_windows_on_a_delayed_socket(
     tmp_path: pathlib.Path, window: int
 ) -> None:
     streaming, _ = _kermit_seconds(tmp_path / "s", KermitConfig(streaming=True, **HINTS))
-    windowed, _ = _kermit_seconds(tmp_path / "w", KermitConfig(window=window, **HINTS))
+    windowed, _ = _kermit_seconds(
+        tmp_path / "w", KermitConfig(window=window, streaming=False, **HINTS)
+    )
     assert streaming < windowed
+
+
+def test_a_serial_socket_port_streams_by_default(tmp_path: pathlib.Path) -> None:
+    """``streaming=None`` (the default): kermit_send and kermit_receive see a
+    SerialSocket and offer streaming, as C-Kermit's SET RELIABLE AUTO does."""
+    _, stats = _kermit_seconds(tmp_path / "auto", KermitConfig(**HINTS))
+    assert stats.packets_received == 5 + stats.retransmissions  # no ACK of any D
