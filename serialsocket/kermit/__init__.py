@@ -3,7 +3,9 @@
 Kermit's own half-duplex file-transfer protocol (S, F, A, D..., Z, B) on the
 same packet layer as the serial socket (:mod:`serialsocket.packets`): sliding
 windows up to :data:`MAX_KERMIT_WINDOW`, long packets, CRC-16 block checks,
-8th-bit and repeat prefixes, attribute packets.  Binary mode only.
+8th-bit and repeat prefixes, attribute packets (size, type, date,
+disposition), RESEND/REGET/PSEND recovery, text mode, FORCE-3, streaming on
+reliable transports, name conversion, and server mode.
 
 Over a port (any ``trio.abc.Stream``, e.g. :func:`serialsocket.open_port`)::
 
@@ -28,7 +30,9 @@ then :class:`TransferComplete` or :class:`TransferFailed`.
 
 :class:`KermitConfig` holds the local settings (``max_packet_length``,
 ``window``, ``check`` as a :class:`serialsocket.packets.BlockCheck`,
-``timeout``, ``retry_limit``, ``seven_bit``, ``repeat``, ``attributes``).
+``timeout``, ``retry_limit``, ``seven_bit``, ``repeat``, ``attributes``,
+the line hints ``delay`` and ``rate``, ``dynamic_length``, ``force3``,
+``streaming``, ``recovery``, ``resend``, ``text``, ``literal_names``).
 Server mode: :func:`kermit_server` serves a directory until FINISH or BYE
 (:class:`KermitServer` is its sans-I/O core); :func:`kermit_get` and
 :func:`kermit_remote` (one of :data:`REMOTE_COMMANDS`) are the client.
