@@ -113,6 +113,13 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--json", action="store_true", help="print the report as one JSON object")
     ap.add_argument(
+        "--keyboard",
+        action="store_true",
+        help="drive the hand controller from the keyboard instead of the task's script "
+        "(w/s a/d r/f move the handle 5 mm, q/e turn, space the index button, p pose change, "
+        "g the gripper, x emergency stop, Q quit; keys may be piped in from a file)",
+    )
+    ap.add_argument(
         "--live",
         action="store_true",
         help="the teleoperation view on stderr: mode and buttons, force/torque bars, predicted "
@@ -182,6 +189,7 @@ def teleop_main(args: argparse.Namespace) -> int:
         force_stop=not args.no_force_stop,
         real=not args.virtual,
         live=args.live,
+        keyboard=args.keyboard,
         commands=args.with_commands or args.stop_via == "command",
         stop_via=args.stop_via,
         duration=args.duration,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -31,7 +32,7 @@ from ._contact import Array
 from ._frhc import HandController
 from ._remote import rotation
 
-__all__ = ["Operator", "Script", "Waypoint", "peg_script", "surface_script"]
+__all__ = ["Intent", "Operator", "Script", "Waypoint", "peg_script", "surface_script"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +43,15 @@ class Waypoint:
     engaged: bool = True
     trigger: int = 0
     pose_change: bool = False
+
+
+class Intent(Protocol):
+    """Where the operator means the handle to be: a :class:`Script`, or a person's keys."""
+
+    @property
+    def duration(self) -> float: ...
+
+    def at(self, t: float) -> tuple[Array, Array, Waypoint]: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,7 +175,7 @@ def peg_script(
 class Operator:
     """The operator and the FRHC: ``sample(now, dt)`` every sampling interval."""
 
-    script: Script
+    script: Intent
     mode: TeleopMode
     force_reflection: bool = False
     shared_compliance: bool = False

@@ -55,7 +55,8 @@ from tcpstream.teleop import (
 
 from ._contact import ContactModel, Hole
 from ._executor import TeleopExecutor
-from ._operator import Operator, Script, peg_script, surface_script
+from ._keyboard import KeyboardScript, read_keys
+from ._operator import Intent, Operator, Script, peg_script, surface_script
 from ._remote import RemoteArm, RemoteConfig, rate_deadman, rotation
 from ._view import LiveView, ViewState, render
 
@@ -92,6 +93,8 @@ class TeleopOptions:
     force_stop: bool = True
     real: bool = False
     """Serial only: real ptys joined by the impaired relay, on the wall clock."""
+    keyboard: bool = False
+    """A person drives the hand controller from the keyboard (stdin) instead of the script."""
     live: bool = False
     """Show the teleoperation view on stderr while the run goes (a terminal only)."""
     commands: bool = False
@@ -318,7 +321,8 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
     """One run on whatever clock trio has (virtual under ``run_virtual``)."""
     link = LinkConfig.preset(options.preset, seed=options.seed)
     one_way = link.a_to_b.delay + link.a_to_b.jitter
-    script = script_for(options.task, options.mode)
+    keys = KeyboardScript() if options.keyboard else None
+    script: Intent = keys if keys is not None else script_for(options.task, options.mode)
     duration = options.duration or script.duration + 2 * one_way + 1.0
     contact, q0 = world_for(options.task)
     deadman = rate_deadman(one_way, _line_interval(link))
@@ -408,10 +412,14 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                     t0 = trio.current_time()
                     dt = 1.0 / SAMPLE_RATE
                     k = 0
-                    while k * dt <= duration:
+                    if keys is not None:
+                        nursery.start_soon(read_keys, keys)
+                    while k * dt <= duration and not (keys is not None and keys.done):
                         await trio.sleep_until(t0 + k * dt)
                         now = trio.current_time()
                         stop = options.stop_at
+                        if keys is not None and keys.stop_requested:
+                            stop = 0.0  # the person pressed x
                         if stop is not None and stop_sent is None and now - t0 >= stop:
                             stop_sent = now
                             if options.stop_via == "command" and client is not None:
