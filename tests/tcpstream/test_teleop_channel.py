@@ -393,3 +393,20 @@ def test_over_tls_keyed() -> None:
         return got
 
     assert trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0)) == list(range(1, 53))
+
+
+@pytest.mark.parametrize(
+    ("key", "reason"), [(KEY, RefuseCode.NOT_AUTHORIZED), (None, RefuseCode.BAD_HELLO)]
+)
+def test_a_sample_before_the_hello_is_refused(key: bytes | None, reason: RefuseCode) -> None:
+    """Keyed, a tagged packet before the handshake is an authentication failure; unkeyed,
+    a first packet that is not a HELLO is a bad hello.  Either way: REFUSE, closed."""
+    arm = ArmChannel(key, bytes(16), rate_deadman=1.0, control_rate=100.0)
+    op = OperatorChannel("operator", KEY, bytes(16))
+    op.offer(sample(1))  # not granted: nothing is sent
+    assert op.poll(0.0) is False
+    first = encode_sample(sample(1), 1, None, b"\x11")
+    assert arm.receive_data(first, 0.0) == [Refused(reason)]
+    assert arm.state is ChannelState.CLOSED
+    assert arm.data_to_send()[3] == TeleopKind.REFUSE
+    assert arm.receive_data(b"more", 0.0) == []  # a closed end reads nothing more
