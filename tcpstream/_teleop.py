@@ -44,6 +44,10 @@ _READ = 4096
 
 BacklogProbe = Callable[[], Backlog | None]
 
+HANDSHAKE_TIMEOUT = 60.0
+"""Seconds from HELLO to GRANT before either end gives up: several round trips of the
+Earth-Moon line behind a serial socket's retransmissions (a keyed handshake is two)."""
+
 
 class TeleopRefused(Exception):
     """The arm refused the channel, or it ended before the grant."""
@@ -187,6 +191,7 @@ async def open_teleop(
     on_reply: Callable[[Reply, float], None] | None = None,
     poll_interval: float = 0.002,
     nonce_source: Callable[[int], bytes] = secrets.token_bytes,
+    handshake_timeout: float = HANDSHAKE_TIMEOUT,
 ) -> AsyncIterator[TeleopOperator]:
     """Open the teleoperation channel on ``stream`` and yield the granted operator end.
 
@@ -208,7 +213,12 @@ async def open_teleop(
         nursery.start_soon(op._writer)
         ch.connect()
         op.wake()
-        await op._decided.wait()
+        with trio.move_on_after(handshake_timeout):
+            await op._decided.wait()
+        if not op._decided.is_set():
+            raise TeleopRefused(
+                RefuseCode.NORMAL, f"no answer from the arm within {handshake_timeout:g} s"
+            )
         if op.granted is None:
             reason = op.refused if op.refused is not None else RefuseCode.NORMAL
             raise TeleopRefused(reason, f"the arm refused the teleoperation channel: {reason.name}")
@@ -244,7 +254,9 @@ class TeleopArm:
         on_sample: Callable[[Sample, float], None] | None = None,
         nonce_source: Callable[[int], bytes] = secrets.token_bytes,
         poll_interval: float = 0.002,
+        handshake_timeout: float = HANDSHAKE_TIMEOUT,
     ) -> None:
+        self.handshake_timeout = handshake_timeout
         self._key = key
         self._on_sample = on_sample
         self.rate_deadman = rate_deadman
@@ -300,12 +312,23 @@ class TeleopArm:
         pump = _ArmPump(stream, ch, backlog, self._poll_interval, self)
         async with trio.open_nursery() as nursery:
             nursery.start_soon(pump._reader)
+            nursery.start_soon(self._handshake_deadline, ch, pump)
             # The writer returns once the channel is over and its REFUSE or BYE is out.
             await pump._writer()
             nursery.cancel_scope.cancel()
         if self._current is pump:
             self._retired.append(ch.statistics())
             self._current = None
+
+    async def _handshake_deadline(self, ch: ArmChannel, pump: _ArmPump) -> None:
+        """A peer that is not granted within the handshake timeout is let go: no
+        half-open connection holds a task for ever."""
+        await trio.sleep(self.handshake_timeout)
+        if ch.state is not ChannelState.OPEN and ch.state is not ChannelState.CLOSED:
+            ch.close(RefuseCode.NORMAL)
+            self.refused += 1
+            pump.closed.set()
+            pump.wake()
 
 
 class _ArmPump(_Pump):

@@ -410,3 +410,23 @@ def test_a_sample_before_the_hello_is_refused(key: bytes | None, reason: RefuseC
     assert arm.state is ChannelState.CLOSED
     assert arm.data_to_send()[3] == TeleopKind.REFUSE
     assert arm.receive_data(b"more", 0.0) == []  # a closed end reads nothing more
+
+
+def test_handshake_timeouts_at_both_ends() -> None:
+    async def main() -> None:
+        # An operator whose arm never answers gives up.
+        a, _b = trio.testing.memory_stream_pair()
+        start = trio.current_time()
+        with pytest.raises(TeleopRefused, match="no answer from the arm within 5 s"):
+            async with open_teleop(a, identity="op", handshake_timeout=5.0):
+                pass
+        assert trio.current_time() - start == pytest.approx(5.0)
+        # An arm whose peer never says HELLO lets it go.
+        arm = TeleopArm(rate_deadman=1.0, control_rate=125.0, handshake_timeout=7.0)
+        _c, d = trio.testing.memory_stream_pair()
+        start = trio.current_time()
+        await arm.serve_stream(d)
+        assert trio.current_time() - start == pytest.approx(7.0)
+        assert arm.refused == 1
+
+    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
