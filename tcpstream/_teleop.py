@@ -17,15 +17,15 @@ from collections.abc import AsyncIterator, Callable
 
 import trio
 
-from ._teleop_connection import (
-    ArmChannel,
+from ._teleop_connection import ArmChannel, OperatorChannel
+from ._teleop_packet import Reply, Sample
+from ._teleop_state import (
     Backlog,
     ChannelClosed,
     ChannelState,
     ChannelStatistics,
     Granted,
     OperatorArrived,
-    OperatorChannel,
     RefuseCode,
     Refused,
     ReplyReceived,
@@ -33,7 +33,6 @@ from ._teleop_connection import (
     StopArrived,
     TeleopEvent,
 )
-from ._teleop_packet import Reply, Sample
 
 __all__ = ["TeleopArm", "TeleopOperator", "TeleopRefused", "open_teleop"]
 

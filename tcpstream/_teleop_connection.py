@@ -20,11 +20,9 @@ first measurement).  A STOP bypasses both.
 
 from __future__ import annotations
 
-import enum
 import hmac
 import struct
 from collections import deque
-from dataclasses import dataclass
 
 from ._teleop_packet import (
     HEADER_SIZE,
@@ -47,25 +45,24 @@ from ._teleop_packet import (
     size_of,
     tag_for,
 )
+from ._teleop_state import (
+    TRANSITIONS,
+    Backlog,
+    ChannelClosed,
+    ChannelState,
+    ChannelStatistics,
+    Granted,
+    IllegalTransition,
+    OperatorArrived,
+    RefuseCode,
+    Refused,
+    ReplyReceived,
+    SampleArrived,
+    StopArrived,
+    TeleopEvent,
+)
 
-__all__ = [
-    "TRANSITIONS",
-    "ArmChannel",
-    "Backlog",
-    "ChannelClosed",
-    "ChannelState",
-    "ChannelStatistics",
-    "Granted",
-    "IllegalTransition",
-    "OperatorArrived",
-    "OperatorChannel",
-    "RefuseCode",
-    "Refused",
-    "ReplyReceived",
-    "SampleArrived",
-    "StopArrived",
-    "TeleopEvent",
-]
+__all__ = ["ArmChannel", "OperatorChannel"]
 
 TO_ARM = b"\x11"
 """Direction byte bound into operator -> arm tags (not the command session's 0x01)."""
@@ -79,146 +76,6 @@ MIN_WINDOW = 4
 """Never fewer samples in flight than this, whatever the measurement said."""
 _RTT_HISTORY = 64
 """Samples remembered for matching replies to send times: at least the window."""
-
-
-class ChannelState(enum.Enum):
-    IDLE = "idle"
-    HELLO_SENT = "hello-sent"
-    AUTH_SENT = "auth-sent"
-    AWAITING_HELLO = "awaiting-hello"
-    CHALLENGED = "challenged"
-    AWAITING_DECISION = "awaiting-decision"
-    OPEN = "open"
-    CLOSED = "closed"
-
-
-S = ChannelState
-TRANSITIONS: frozenset[tuple[ChannelState, ChannelState]] = frozenset(
-    {
-        # operator
-        (S.IDLE, S.HELLO_SENT),
-        (S.HELLO_SENT, S.AUTH_SENT),  # CHALLENGE answered with AUTH
-        (S.HELLO_SENT, S.OPEN),  # GRANT (unkeyed arm)
-        (S.AUTH_SENT, S.OPEN),  # GRANT with a valid server proof
-        # arm
-        (S.AWAITING_HELLO, S.CHALLENGED),  # keyed: CHALLENGE sent
-        (S.AWAITING_HELLO, S.AWAITING_DECISION),  # unkeyed HELLO
-        (S.CHALLENGED, S.AWAITING_DECISION),  # AUTH verified
-        (S.AWAITING_DECISION, S.OPEN),  # grant()
-        # both: BYE, refusal, garbage, authentication failure
-        *((s, S.CLOSED) for s in ChannelState if s is not S.CLOSED),
-    }
-)
-"""Every legal state change of either end; anything else raises :class:`IllegalTransition`."""
-
-
-class IllegalTransition(Exception):
-    """A local call the channel's state does not allow (the caller's bug)."""
-
-
-class RefuseCode(enum.IntEnum):
-    """REFUSE and BYE reason byte (PROTOCOL.md 14.2)."""
-
-    NORMAL = 0
-    BUSY = 1
-    NOT_AUTHORIZED = 2
-    BAD_HELLO = 3
-    GARBAGE = 4
-    SHUTDOWN = 5
-
-
-@dataclass(frozen=True, slots=True)
-class Backlog:
-    """The transport's own figures: our bytes it holds that are not yet on the wire."""
-
-    queued_bytes: int
-    """Accepted, not yet sent even once (serial socket: ``bytes_queued``)."""
-    line_seconds: float = 0.0
-    """Already handed to the line, still waiting for it (serial socket: ``line_backlog``)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Granted:
-    rate_deadman: float
-    control_rate: float
-
-
-@dataclass(frozen=True, slots=True)
-class Refused:
-    reason: RefuseCode
-
-
-@dataclass(frozen=True, slots=True)
-class ReplyReceived:
-    reply: Reply
-    now: float
-
-
-@dataclass(frozen=True, slots=True)
-class OperatorArrived:
-    identity: str
-
-
-@dataclass(frozen=True, slots=True)
-class SampleArrived:
-    sample: Sample
-    now: float
-
-
-@dataclass(frozen=True, slots=True)
-class StopArrived:
-    now: float
-
-
-@dataclass(frozen=True, slots=True)
-class ChannelClosed:
-    reason: RefuseCode
-    by_peer: bool
-
-
-TeleopEvent = (
-    Granted
-    | Refused
-    | ReplyReceived
-    | OperatorArrived
-    | SampleArrived
-    | StopArrived
-    | ChannelClosed
-)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ChannelStatistics:
-    """One end's record (``statistics()``)."""
-
-    state: str
-    packets_in: int
-    packets_out: int
-    bytes_in: int
-    bytes_out: int
-    bad_packets: int
-    tag_failures: int
-    replays: int
-    resyncs: int
-    samples_offered: int
-    samples_sent: int
-    samples_coalesced: int
-    samples_received: int
-    samples_superseded: int
-    replies_sent: int
-    replies_coalesced: int
-    replies_received: int
-    stops_sent: int
-    stops_received: int
-    held_by_backlog: int
-    held_by_window: int
-    samples_after_stop: int
-    """Operator: samples offered after its STOP (never sent); arm: samples that
-    arrived after a STOP (ignored)."""
-    in_flight_bytes: int
-    window_bytes: float
-    delivery_rate: float | None
-    min_rtt: float | None
 
 
 class _End:

@@ -20,24 +20,7 @@ command channel and a sample channel, commands always first.
 from __future__ import annotations
 
 from ._teleop import TeleopArm, TeleopOperator, TeleopRefused, open_teleop
-from ._teleop_connection import (
-    TRANSITIONS,
-    ArmChannel,
-    Backlog,
-    ChannelClosed,
-    ChannelState,
-    ChannelStatistics,
-    Granted,
-    IllegalTransition,
-    OperatorArrived,
-    OperatorChannel,
-    RefuseCode,
-    Refused,
-    ReplyReceived,
-    SampleArrived,
-    StopArrived,
-    TeleopEvent,
-)
+from ._teleop_connection import ArmChannel, OperatorChannel
 from ._teleop_mux import COMMANDS, MAX_FRAME, TELEOP, MuxChannel, StreamMux, open_mux
 from ._teleop_packet import (
     MAGIC,
@@ -57,6 +40,22 @@ from ._teleop_packet import (
     encode_reply,
     encode_sample,
     size_of,
+)
+from ._teleop_state import (
+    TRANSITIONS,
+    Backlog,
+    ChannelClosed,
+    ChannelState,
+    ChannelStatistics,
+    Granted,
+    IllegalTransition,
+    OperatorArrived,
+    RefuseCode,
+    Refused,
+    ReplyReceived,
+    SampleArrived,
+    StopArrived,
+    TeleopEvent,
 )
 
 __all__ = [

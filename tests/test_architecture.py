@@ -248,6 +248,7 @@ TCPSTREAM_SANS_IO = [
     "_state",
     "_teleop_connection",
     "_teleop_packet",
+    "_teleop_state",
 ]
 
 
