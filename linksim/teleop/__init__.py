@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from ._contact import ContactModel, Hole, Wrench
 from ._frhc import HandController, frhc_jacobian, frhc_pose
+from ._loopback import run_teleop_loopback
 from ._operator import Operator, Script, Waypoint, peg_script, surface_script
 from ._plot import plot_contact_force
 from ._remote import RemoteArm, RemoteConfig, RemoteStatistics, rate_deadman
-from ._run import TeleopOptions, TeleopReport, run_teleop, run_teleop_loopback, world_for
+from ._run import TeleopOptions, TeleopReport, run_teleop, world_for
 
 __all__ = [
     "ContactModel",

@@ -12,12 +12,9 @@ on the wall clock (the latency benchmark).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import functools
 import math
 import random
 import sys
-from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -26,30 +23,18 @@ import trio
 
 from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
 from linksim.link import (
-    DirectionConfig,
     LinkConfig,
-    endpoint_config_for,
-    open_impaired_link,
     rtt_hint_for,
-    run_relay,
-    serial_socket_pair,
 )
-from serialsocket import SerialSocket, accept, connect, open_port
 from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream
 from tcpstream.commands import emergency_stop
 from tcpstream.teleop import (
-    TELEOP,
-    Backlog,
     ChannelStatistics,
-    ContactFlags,
     Reply,
-    ReplyStatus,
     Sample,
-    StreamMux,
     TeleopArm,
     TeleopMode,
     TeleopRefused,
-    open_mux,
     open_teleop,
 )
 
@@ -58,9 +43,19 @@ from ._executor import TeleopExecutor
 from ._keyboard import KeyboardScript, read_keys
 from ._operator import Intent, Operator, Script, peg_script, surface_script
 from ._remote import RemoteArm, RemoteConfig, rate_deadman, rotation
+from ._transport import SAMPLE_RATE, SerialFigures, line_interval, open_channels
 from ._view import LiveView, ViewState, render
 
-__all__ = ["TeleopOptions", "TeleopReport", "run_teleop", "run_teleop_loopback"]
+__all__ = [
+    "CONTROL_RATE",
+    "IDENTITY",
+    "TeleopOptions",
+    "TeleopReport",
+    "percentile",
+    "run_teleop",
+    "script_for",
+    "world_for",
+]
 
 IDENTITY = "teleop-operator"
 STOP_SETTLE = 0.005
@@ -68,12 +63,9 @@ STOP_SETTLE = 0.005
 COMMAND_HEARTBEAT = 10.0
 """s: the command session's heartbeat beside a sample stream (samples show the line
 is alive; at 2400 bit/s a 216-byte heartbeat takes 1.6 s of line)."""
-SAMPLE_RATE = 104.0
-"""Hz: seed 004's closed loop ("approximately 104 Hz")."""
 CONTROL_RATE = 125.0
 """Hz: the arm's control loop (seed 000's sample rate)."""
 TABLE_DROP = 0.10
-_ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 """The table is this far below the hand's start (m)."""
 
 
@@ -168,153 +160,8 @@ def world_for(task: str) -> tuple[ContactModel, np.ndarray[Any, np.dtype[np.floa
     return ContactModel(table_z=table), q0
 
 
-def _percentile(values: list[float], q: float) -> float:
+def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.array(values), q)) if values else math.nan
-
-
-class _SerialFigures:
-    """The serial socket's own figures, as a :class:`Backlog` for the channel's pacing.
-
-    ``bytes_queued`` is what the socket holds unsent.  Its ``line_backlog`` is
-    as of the endpoint's last event and goes stale while the link is idle, so
-    the line's queue is followed from the socket's ``port_bytes_out`` instead:
-    every byte written to the port takes one character time of the line, and
-    the line drains at its rate.  ``slack`` (one sample's line time) is
-    forgiven: a sample handed over then waits behind nothing of ours, and at
-    most one sample is ever in the line's queue.
-    """
-
-    def __init__(self, sock: SerialSocket, char_time: float, slack: float) -> None:
-        self._sock = sock
-        self._char_time = char_time
-        self._slack = slack
-        self._out = 0
-        self._line = 0.0
-        self._at = trio.current_time()
-        self.max_line = 0.0
-        """The most line time (s) ever committed ahead of a sample: no queue grows."""
-        self.max_queued = 0
-
-    def __call__(self) -> Backlog:
-        st = self._sock.statistics()
-        now = trio.current_time()
-        self._line = max(0.0, self._line - (now - self._at))
-        self._line += (st.port_bytes_out - self._out) * self._char_time
-        self._out, self._at = st.port_bytes_out, now
-        self.max_line = max(self.max_line, self._line)
-        self.max_queued = max(self.max_queued, st.link.bytes_queued)
-        return Backlog(st.link.bytes_queued, max(0.0, self._line - self._slack))
-
-
-@contextlib.asynccontextmanager
-async def _streams(
-    options: TeleopOptions, link: LinkConfig, holder: dict[str, _SerialFigures]
-) -> AsyncIterator[
-    tuple[
-        trio.abc.Stream, trio.abc.Stream, Callable[[], Backlog] | None, Callable[[], Backlog] | None
-    ]
-]:
-    if options.transport == "serial":
-        pair = _pty_pair(link) if options.real else serial_socket_pair(link)
-        async with pair as (ctl, arm):
-            slack, char = _line_interval(link), link.a_to_b.char_time
-            holder["operator"] = _SerialFigures(ctl, char, 0.0)
-            yield ctl, arm, holder["operator"], _SerialFigures(arm, char, slack)
-        return
-    d = link.a_to_b
-    line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
-    async with open_impaired_link(line) as (ctl_end, arm_end):
-        yield ctl_end, arm_end, None, None
-
-
-@contextlib.asynccontextmanager
-async def _pty_pair(link: LinkConfig) -> AsyncIterator[tuple[SerialSocket, SerialSocket]]:
-    """Two serial sockets on two real ptys joined by ``linksim relay``'s impaired line."""
-    rate = link.a_to_b.rate
-    baud = int(rate) if rate is not None else 115200
-    paths: list[str] = []
-    ready = trio.Event()
-    stop = trio.Event()
-
-    def on_ready(a: str, b: str) -> None:
-        paths.extend([a, b])
-        ready.set()
-
-    async with trio.open_nursery() as nursery:
-        nursery.start_soon(functools.partial(run_relay, link, stop=stop, on_ready=on_ready))
-        await ready.wait()
-        port_a = await open_port(paths[0], baud)
-        port_b = await open_port(paths[1], baud)
-        config = endpoint_config_for(link)
-        sockets: dict[str, SerialSocket] = {}
-        try:
-            async with trio.open_nursery() as handshake:
-
-                async def accept_b() -> None:
-                    sockets["b"] = await accept(port_b, config)
-
-                handshake.start_soon(accept_b)
-                sockets["a"] = await connect(port_a, config)
-            yield sockets["a"], sockets["b"]
-        finally:
-            with trio.move_on_after(5.0) as scope:
-                scope.shield = True
-                for sock in sockets.values():
-                    await sock.aclose()
-                await port_a.aclose()
-                await port_b.aclose()
-            stop.set()
-
-
-Probe = Callable[[], Backlog] | None
-
-
-def _with_mux(mux: StreamMux, inner: Probe) -> Callable[[], Backlog]:
-    """The sample channel's backlog through the mux: the mux's bytes ahead of it (commands
-    first) plus the transport's own figures."""
-
-    def probe() -> Backlog:
-        below = inner() if inner is not None else Backlog(0)
-        return Backlog(below.queued_bytes + mux.backlog(TELEOP), below.line_seconds)
-
-    return probe
-
-
-@contextlib.asynccontextmanager
-async def _channels(
-    options: TeleopOptions, link: LinkConfig, holder: dict[str, _SerialFigures]
-) -> AsyncIterator[
-    tuple[
-        trio.abc.Stream,
-        trio.abc.Stream,
-        Probe,
-        Probe,
-        trio.abc.Stream | None,
-        trio.abc.Stream | None,
-    ]
-]:
-    """(operator's sample stream, arm's, their probes, operator's command stream, arm's)."""
-    async with _streams(options, link, holder) as (ctl, arm, ctl_probe, arm_probe):
-        if not options.commands:
-            yield ctl, arm, ctl_probe, arm_probe, None, None
-            return
-        async with open_mux(ctl) as ctl_mux, open_mux(arm) as arm_mux:
-            yield (
-                ctl_mux.teleop,
-                arm_mux.teleop,
-                _with_mux(ctl_mux, ctl_probe),
-                _with_mux(arm_mux, arm_probe),
-                ctl_mux.commands,
-                arm_mux.commands,
-            )
-
-
-def _line_interval(link: LinkConfig) -> float:
-    """Seconds one sample takes on the line (prefix-encoded), or one sampling interval."""
-    d = link.a_to_b
-    if d.rate is None:
-        return 1.0 / SAMPLE_RATE
-    return max(1.0 / SAMPLE_RATE, (56 * 1.6 + 20) * d.bits_per_char / d.rate)
 
 
 async def run_teleop(options: TeleopOptions) -> TeleopReport:
@@ -325,7 +172,7 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
     script: Intent = keys if keys is not None else script_for(options.task, options.mode)
     duration = options.duration or script.duration + 2 * one_way + 1.0
     contact, q0 = world_for(options.task)
-    deadman = rate_deadman(one_way, _line_interval(link))
+    deadman = rate_deadman(one_way, line_interval(link))
     remote = RemoteArm(
         RemoteConfig(
             control_rate=CONTROL_RATE, rate_deadman=deadman, force_stop=options.force_stop
@@ -360,11 +207,11 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
     error: str | None = None
     op_stats = None
     final_view: ViewState | None = None
-    figures: dict[str, _SerialFigures] = {}
+    figures: dict[str, SerialFigures] = {}
     start = trio.current_time()
     with trio.move_on_after(options.timeout) as scope:
         async with (
-            _channels(options, link, figures) as (
+            open_channels(options.transport, options.real, options.commands, link, figures) as (
                 ctl,
                 arm_stream,
                 ctl_backlog,
@@ -433,7 +280,7 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                             live.draw(view.state(now, op.statistics()))
                         k += 1
                     # Let the last sample and its reply cross the line before counting.
-                    await trio.sleep(2 * one_way + 2 * _line_interval(link) + 0.1)
+                    await trio.sleep(2 * one_way + 2 * line_interval(link) + 0.1)
                     op_stats = op.statistics()
                     final_view = view.state(trio.current_time(), op_stats)
                     executor.armed = False  # the session's end halts the arm: not a stop
@@ -527,7 +374,7 @@ def _report(
     start: float,
     error: str | None,
     stop_to_arm: float | None,
-    line: _SerialFigures | None = None,
+    line: SerialFigures | None = None,
 ) -> TeleopReport:
     st = remote.stats
     ages = st.ages
@@ -558,8 +405,8 @@ def _report(
         samples_superseded=arm_st.samples_superseded if arm_st is not None else 0,
         samples_applied=st.samples_applied,
         setpoint_age_s={
-            "p50": _percentile(ages, 50),
-            "p99": _percentile(ages, 99),
+            "p50": percentile(ages, 50),
+            "p99": percentile(ages, 99),
             "max": max(ages) if ages else math.nan,
         },
         max_contact_force_n=st.max_force,
@@ -580,82 +427,3 @@ def _report(
         error=error,
         force_trace=st.force_trace,
     )
-
-
-async def run_teleop_loopback(seconds: float, *, key: bytes | None = None) -> dict[str, Any]:
-    """The latency benchmark: real TCP over loopback, wall clock, 104 Hz for ``seconds``.
-
-    Every sample carries its sampling time; the arm notes when its control
-    loop applies it.  Returns sample counts and the sampling-to-execution
-    latency (p50, p99, max).
-    """
-    applied: list[float] = []
-    numbers: list[int] = []
-    kinematics: list[float] = []
-    arm_end: TeleopArm
-
-    def on_sample(sample: Sample, arrived: float) -> None:
-        # The arm servos on arrival: the sample is executed now, and the reply
-        # acknowledges it (the operator's pacing window moves on).
-        applied.append(arrived - sample.stamp)
-        numbers.append(sample.sample)
-        arm_end.reply(
-            Reply(
-                sample.sample,
-                ReplyStatus.FOLLOWING,
-                ContactFlags(0),
-                2,
-                0,
-                sample.stamp,
-                0.0,
-                _ZERO6,
-                _ZERO6,
-                _ZERO6,
-            )
-        )
-
-    arm_end = TeleopArm(key=key, rate_deadman=0.1, control_rate=SAMPLE_RATE, on_sample=on_sample)
-    async with trio.open_nursery() as nursery:
-        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
-        port = listeners[0].socket.getsockname()[1]
-
-        async def serve(stream: trio.SocketStream) -> None:
-            await arm_end.serve_stream(stream)
-
-        nursery.start_soon(trio.serve_listeners, serve, listeners)
-        stream = await trio.open_tcp_stream("127.0.0.1", port)
-        operator = Operator(script_for("surface", TeleopMode.CARTESIAN), TeleopMode.CARTESIAN)
-        async with stream, open_teleop(stream, identity=IDENTITY, key=key) as op:
-            t0 = trio.current_time()
-            dt = 1.0 / SAMPLE_RATE
-            n = int(seconds * SAMPLE_RATE)
-            for k in range(n):
-                await trio.sleep_until(t0 + k * dt)
-                now = trio.current_time()
-                # The FRHC's kinematics (seed 004's KIN stage) run first; the stamp is
-                # when the sample is ready to go: the channel's latency is measured.
-                sample = operator.sample((now - t0) % 13.0, dt, stamp=now)
-                ready = trio.current_time()
-                kinematics.append(ready - now)
-                op.submit(dataclasses.replace(sample, stamp=ready))
-            await trio.sleep(0.1)
-            stats = op.statistics()
-        nursery.cancel_scope.cancel()
-    return {
-        "seconds": seconds,
-        "sample_rate_hz": SAMPLE_RATE,
-        "samples_sampled": operator.sampled,
-        "samples_sent": stats.samples_sent,
-        "samples_coalesced": stats.samples_coalesced,
-        "samples_applied": len(numbers),
-        "every_sample_applied": numbers == list(range(1, operator.sampled + 1)),
-        "operator_kinematics_s": {
-            "p50": _percentile(kinematics, 50),
-            "p99": _percentile(kinematics, 99),
-        },
-        "latency_s": {
-            "p50": _percentile(applied, 50),
-            "p99": _percentile(applied, 99),
-            "max": max(applied) if applied else math.nan,
-        },
-    }
