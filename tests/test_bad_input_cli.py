@@ -578,7 +578,6 @@ RUNTIME_CASES = [
     (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/null"], 1, "both", False),
     (["linksim", "relay", "--device", "/dev/null", "--device", "/dev/zero"], 1, "terminal", False),
     (["linksim", "teleop", "--virtual", "--key-file", "/nonexistent"], 2, "nonexistent", False),
-    (["linksim", "teleop", "--transport", "tcp"], 2, "--virtual", False),
 ]
 
 

@@ -65,8 +65,8 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
         "--transport",
         choices=["serial", "tcp", "loopback"],
         default="serial",
-        help="serial socket on the line, TCP with the line's delay (both --virtual), or real "
-        "TCP over loopback on the wall clock (the latency benchmark; default serial)",
+        help="serial socket on the line, TCP with the line's delay, or real TCP over "
+        "loopback with no delay (the latency benchmark; default serial)",
     )
     ap.add_argument(
         "--preset",
@@ -108,8 +108,9 @@ def add_teleop_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument(
         "--virtual",
         action="store_true",
-        help="one process on a virtual clock (instant, reproducible); without it serial runs "
-        "over two real ptys joined by the impaired relay, in real time",
+        help="one process on a virtual clock (instant, reproducible); without it, in real "
+        "time, serial runs over two real ptys joined by the impaired relay and tcp over a "
+        "real loopback connection seen through the line's delay",
     )
     ap.add_argument("--json", action="store_true", help="print the report as one JSON object")
     ap.add_argument(
@@ -170,13 +171,6 @@ def teleop_main(args: argparse.Namespace) -> int:
                 f"{lat['p99'] * 1e3:.2f} ms, max {lat['max'] * 1e3:.2f} ms"
             )
         return 0 if ok else 1
-    if not args.virtual and args.transport == "tcp":
-        print(
-            "linksim teleop: --transport tcp runs on a virtual clock only: add --virtual "
-            "(real TCP: --transport loopback; real ptys: --transport serial)",
-            file=sys.stderr,
-        )
-        return 2
     options = TeleopOptions(
         mode=TeleopMode[args.mode.upper()],
         task=args.task,

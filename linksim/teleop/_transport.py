@@ -80,8 +80,42 @@ async def _streams(
         return
     d = link.a_to_b
     line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))
+    if real:
+        async with _tcp_through(line) as (ctl_end, arm_end):
+            yield ctl_end, arm_end, None, None
+        return
     async with open_impaired_link(line) as (ctl_end, arm_end):
         yield ctl_end, arm_end, None, None
+
+
+@contextlib.asynccontextmanager
+async def _tcp_through(line: LinkConfig) -> AsyncIterator[tuple[trio.abc.Stream, trio.abc.Stream]]:
+    """Real TCP on 127.0.0.1, the operator's end seen through ``line`` (its delay, as
+    ``linksim demo --transport tcp`` does): an in-memory delayed line whose far end
+    is copied to and from the socket."""
+    listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+    port = listeners[0].socket.getsockname()[1]
+    async with (
+        listeners[0],
+        await trio.open_tcp_stream("127.0.0.1", port) as tcp,
+        await listeners[0].accept() as arm_end,
+        open_impaired_link(line) as (near, far),
+        trio.open_nursery() as nursery,
+    ):
+        nursery.start_soon(_copy, far, tcp)
+        nursery.start_soon(_copy, tcp, far)
+        try:
+            yield near, arm_end
+        finally:
+            nursery.cancel_scope.cancel()
+
+
+async def _copy(source: trio.abc.Stream, sink: trio.abc.Stream) -> None:
+    with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+        while data := await source.receive_some():
+            await sink.send_all(data)
+    with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+        await sink.aclose()
 
 
 @contextlib.asynccontextmanager
