@@ -74,6 +74,8 @@ INITIAL_WINDOW = 16
 """Samples in flight before any reply measured the path: 0.15 s of a 104 Hz loop."""
 MIN_WINDOW = 4
 """Never fewer samples in flight than this, whatever the measurement said."""
+_RATE_SAMPLES = 16
+"""Delivery-rate samples the window's rate is the maximum of: a few round trips of replies."""
 _RTT_HISTORY = 64
 """Samples remembered for matching replies to send times: at least the window."""
 
@@ -256,7 +258,8 @@ class OperatorChannel(_End):
         self._bytes_acked = 0
         self._acked_sample = 0
         self._last_ack: tuple[float, int] | None = None
-        self._rate: float | None = None  # bytes/s delivered, smoothed
+        self._rate: float | None = None  # bytes/s delivered: the most of the recent samples
+        self._rates: deque[float] = deque(maxlen=_RATE_SAMPLES)
         self._min_rtt: float | None = None
         self.last_reply: Reply | None = None
 
@@ -336,7 +339,10 @@ class OperatorChannel(_End):
             then, acked_then = self._last_ack
             if now > then:
                 rate = (self._bytes_acked - acked_then) / (now - then)
-                self._rate = rate if self._rate is None else 0.875 * self._rate + 0.125 * rate
+                # A windowed maximum (BBR's bottleneck filter): the path carried at
+                # least this much lately; a smoothed mean would lag each doubling.
+                self._rates.append(rate)
+                self._rate = max(self._rates)
         self._last_ack = (now, self._bytes_acked)
 
     # -- packets in -----------------------------------------------------------------
