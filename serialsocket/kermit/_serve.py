@@ -56,6 +56,9 @@ class _Served:
         self.root = root.resolve()
         self.cwd = self.root
         self.handles: list[BinaryIO] = []
+        """Files opened for the request being answered, not yet its transaction's."""
+        self.current: list[BinaryIO] = []
+        """Files of the transaction in progress."""
         self.store = _Store(self.cwd)
 
     def inside(self, name: str) -> pathlib.Path | None:
@@ -141,9 +144,23 @@ class _Served:
     def decide(self, name: str, attributes: FileAttributes) -> AttributeReply:
         return self.store.decide(name, attributes)
 
-    def close(self) -> None:
-        for f in self.handles:
+    def begin(self) -> None:
+        """A transaction started: the files opened for its request are its own."""
+        self.current, self.handles = self.handles, []
+
+    def end(self) -> None:
+        """The transaction ended: close its files (not those a request that
+        arrived in the same read has opened already -- they belong to the
+        next one, whose start is reported after this end)."""
+        for f in self.current:
             f.close()
+        self.current.clear()
+        self.store.close()
+
+    def close(self) -> None:
+        for f in (*self.current, *self.handles):
+            f.close()
+        self.current.clear()
         self.handles.clear()
         self.store.close()
 
@@ -174,16 +191,22 @@ async def kermit_server(
 
     def handle(event: ServerEvent) -> None:
         (on_event or _log_server_event)(event)
-        if isinstance(event, TransactionStarted) and event.request.kind == "send":
-            served.store = _Store(served.cwd)
+        if isinstance(event, TransactionStarted):
+            served.begin()
+            if event.request.kind == "send":
+                served.store = _Store(served.cwd)
         elif isinstance(event, TransactionEnded):
-            served.close()
+            # Closing every handle here closed the file of a GET whose request
+            # came in the same read as the last ACK of the one before, and its
+            # sender then read a closed file ("ValueError: read of closed
+            # file", the server crashed; one run in four under load).
+            served.end()
         elif server.request.kind == "send" and not isinstance(event, TransferFailed):
             receiver = server.receiver
             if receiver is None:
                 return
             try:
-                served.store.on_event(event, receiver.attributes)  # type: ignore[arg-type]
+                served.store.on_event(event, receiver.attributes)
             except OSError as exc:
                 server.abort(f"Cannot store file: {exc.strerror or exc}")
 

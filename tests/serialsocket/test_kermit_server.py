@@ -397,3 +397,28 @@ def test_our_client_against_c_kermit_server(tmp_path: pathlib.Path) -> None:
     assert "Available" in answers[1] or "free" in answers[1].lower()
     assert answers[2] == ""
     assert status == [0]
+
+
+def test_a_request_in_the_same_read_as_the_last_ack_keeps_its_file_open(
+    tmp_path: pathlib.Path,
+) -> None:
+    """The server learns that a GET ended and that the next one started from
+    the same read; the end must close the first file only.  Closing every
+    handle at the end crashed the server with "read of closed file" when the
+    client's next request arrived with its last ACK (one run in four of
+    test_our_client_against_our_server under load)."""
+    from serialsocket.kermit._serve import _Served
+
+    (tmp_path / "one").write_bytes(b"1" * 10)
+    (tmp_path / "two").write_bytes(b"2" * 10)
+    served = _Served(tmp_path)
+    first = served._open(tmp_path / "one")
+    served.begin()  # TransactionStarted(get one)
+    second = served._open(tmp_path / "two")  # the next GET, in the same read
+    served.end()  # TransactionEnded(get one), reported after that read
+    served.begin()  # TransactionStarted(get two)
+    assert first.source.closed
+    assert not second.source.closed
+    assert second.source.read() == b"2" * 10
+    served.close()
+    assert second.source.closed
