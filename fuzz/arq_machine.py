@@ -95,6 +95,7 @@ from serialsocket import (
     LinkDead,
     State,
 )
+from serialsocket.argtypes import ENDPOINT_LENGTH
 from serialsocket.packets import EIGHT_BIT_CLEAN, MAX_PACKET_LENGTH, PRINTABLE
 
 __all__ = [
@@ -142,9 +143,9 @@ a byte delivered or acknowledged, a window sliding) before we call it stuck.
 Draining a line full of duplicates and noise takes far fewer; a connection
 that retransmits into a void forever hits this long before the time limit."""
 
-SMALLEST_LENGTH = 33
+SMALLEST_LENGTH = ENDPOINT_LENGTH.lo
 """The smallest ``max_packet_length`` drawn: the smallest ``EndpointConfig``
-accepts, because the 33-character init packet must fit (shorter lengths are
+accepts, because the 37-character init packet must fit (shorter lengths are
 refused with LocalProtocolError; ``test_smallest_packet_length_can_connect``)."""
 
 TIMER_SPIN_LIMIT = 64
@@ -231,6 +232,7 @@ _LENGTHS = st.one_of(
 _DELAYS = st.sampled_from([0.0, 0.001, 0.02, 0.25, 1.3])
 _RATES = st.sampled_from([None, None, 300.0, 2400.0, 9600.0, 115200.0])
 _ENCODINGS = st.sampled_from([PRINTABLE, EIGHT_BIT_CLEAN])
+_LONG_WINDOWS = st.sampled_from([None, 32, 100, 4095, 131071])
 
 
 @st.composite
@@ -239,7 +241,10 @@ def endpoint_configs(
 ) -> EndpointConfig:
     """One side's configuration; the physical line (delay, rate) is shared."""
     return EndpointConfig(
-        window=draw(st.integers(1, MAX_WINDOW)),
+        # Window 31 (half the draws) offers long sequence numbers (PROTOCOL.md
+        # section 9) with the drawn long window; both sides offering uses them.
+        window=draw(st.one_of(st.just(MAX_WINDOW), st.integers(1, MAX_WINDOW))),
+        long_window=draw(_LONG_WINDOWS),
         max_packet_length=draw(_LENGTHS),
         encoding=draw(_ENCODINGS),
         one_way_delay=one_way_delay,

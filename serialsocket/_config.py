@@ -16,12 +16,15 @@ from ._checks import BlockCheck
 from ._encoding import PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._packet import data_capacity
+from ._params import MAX_LONG_WINDOW
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
+    "DEFAULT_BUFFER_CAP",
     "MAX_WINDOW",
     "MIN_CONNECT_TIMEOUT",
     "MIN_ENDPOINT_PACKET_LENGTH",
+    "UNHINTED_CONNECT_TIMEOUT",
     "UNMEASURED_DEAD_AFTER",
     "EndpointConfig",
 ]
@@ -30,21 +33,35 @@ MAX_WINDOW = 31
 """Largest window: sequence numbers are mod 64 and selective repeat needs the
 window to be at most half the space (Kermit's 31; E-Kermit P_WSLOTS)."""
 
-MIN_ENDPOINT_PACKET_LENGTH = 33
-"""The init packet is 33 characters (26 data + header + CRC): each side must
-receive it, so no endpoint may announce less (MIN_PACKET_LENGTH bounds the
-packet layer alone)."""
+MIN_ENDPOINT_PACKET_LENGTH = 37
+"""The init packet is 37 characters (30 data + header + CRC; 33 without the
+long-sequence offer): each side must receive it, so no endpoint may announce
+less (MIN_PACKET_LENGTH bounds the packet layer alone)."""
+
+DEFAULT_BUFFER_CAP = 16 * 1024 * 1024
+"""Most bytes the receive buffer grows to with the bandwidth-delay product:
+7 hours of a 9600 bit/s line, four round trips of it at Mars distance."""
 
 _DERIVED_LENGTHS = (DEFAULT_MAX_PACKET_LENGTH, 256, 512, 1024, 2048)
 """Candidate derived packet lengths: the goodput grid's (bench/results/README.md)."""
+
+_LONG_WINDOW_LENGTH = 512
+"""The longest derived packet length when long sequence numbers may carry a
+wide window (see ``derived_max_packet_length``)."""
 
 _UNKNOWN_RATE_SEND_BUFFER = 64 * 1024
 """Send buffer when the line rate is unknown: a fast line (pty, TCP tunnel)
 drains it in milliseconds, and large writes need few wake-ups."""
 
 MIN_CONNECT_TIMEOUT = 120.0
-"""Seconds the derived connect timeout is at least (hints or none); the init is
-resent with backoff meanwhile, so a silent port costs a few short packets."""
+"""Seconds the derived connect timeout is at least when a delay is hinted; the
+init is resent with backoff meanwhile, so a silent port costs a few short
+packets."""
+
+UNHINTED_CONNECT_TIMEOUT = 3000.0
+"""Seconds the derived connect timeout is with no delay hint: 50 minutes, more
+than a round trip to Mars at its farthest (2 x 22.4 light-minutes).  Nothing
+says the peer is near; ``connect_timeout`` (``--connect-timeout``) sets less."""
 
 UNMEASURED_DEAD_AFTER = 60.0
 """Seconds of silence the derived ``dead_after`` allows before any round trip
@@ -68,7 +85,9 @@ class EndpointConfig:
             cover the repair of a loss; then the shortest power of two that
             can.
         window: window in packets, 1..31 (default 31, the most the mod-64
-            sequence numbers allow).  1 is the paper's stop-and-wait.  The
+            sequence numbers allow), with a peer that does not take long
+            sequence numbers (``long_window``).  1 is the paper's
+            stop-and-wait.  The
             sender never has more unacknowledged packets than the line
             carries in its repair horizon (the bandwidth-delay bound, see
             PROTOCOL.md 4.6), so a wide window never over-commits a short or
@@ -86,16 +105,29 @@ class EndpointConfig:
             (a TCP tunnel, a local pty).  Sets serialisation time, pacing and
             the bandwidth-delay bound on the window.
         bits_per_char: bits per character on the line (8N1 = 10).
+        long_window: the window offered with long sequence numbers
+            (PROTOCOL.md section 9), 1..131071; a telelink peer that offers
+            them too gets the smaller offer, a peer that does not gets
+            ``window``.  None: do not offer them (mod-64 numbers, window
+            ``window``).  Offered only when ``window`` is 31: a narrower
+            window is the window wanted.  The bandwidth-delay bound and the
+            receive buffer keep what is in flight to what the line needs.
         receive_buffer: bytes of received data held for the application
-            (in order, unread) plus out-of-order packets.  When full, the
-            advertised window closes; nothing is dropped that is not resent.
+            (in order, unread) plus out-of-order packets, at least.  When
+            full, the advertised window closes; nothing is dropped that is
+            not resent.  With a line rate, it grows to four round trips of
+            line data (measured round trips once there are some) so that a
+            long fast line keeps its window open, up to ``buffer_cap``.
+        buffer_cap: the most ``receive_buffer`` grows to (default 16 MiB);
+            statistics say when the line wanted more (``buffer_capped``).
         send_buffer: bytes the application may queue beyond what is in flight;
             ``send`` accepts less when it is full (back-pressure).  None
             derives it (:meth:`derived_send_buffer`): what the line carries in
             one round trip when the rate is known, else 64 KiB.
         connect_timeout: give up connecting after this many seconds; None
-            derives it: 10 x the initial timeout, at least 120 s.  The
-            connection request is resent with backoff until then.
+            derives it: 10 x the initial timeout, at least 120 s, or 50
+            minutes with no delay hint (nothing says the peer is not at
+            Mars).  The connection request is resent with backoff until then.
         dead_after: declare the link dead after this much silence while
             data or probes are outstanding; None derives it: 10 x the initial
             timeout, at least 2 s.  It is a floor: once a round trip is
@@ -115,12 +147,14 @@ class EndpointConfig:
 
     max_packet_length: int | None = None
     window: int = MAX_WINDOW
+    long_window: int | None = MAX_LONG_WINDOW
     check: BlockCheck = BlockCheck.CRC16
     encoding: Encoding = field(default=PRINTABLE)
     one_way_delay: float = 0.0
     line_rate: float | None = None
     bits_per_char: int = 10
     receive_buffer: int = 64 * 1024
+    buffer_cap: int = DEFAULT_BUFFER_CAP
     send_buffer: int | None = None
     connect_timeout: float | None = None
     dead_after: float | None = None
@@ -143,6 +177,8 @@ class EndpointConfig:
             )
         if not 1 <= self.window <= MAX_WINDOW:
             raise bad("window", self.window, f"1..{MAX_WINDOW}")
+        if self.long_window is not None and not 1 <= self.long_window <= MAX_LONG_WINDOW:
+            raise bad("long_window", self.long_window, f"None or 1..{MAX_LONG_WINDOW}")
         if not (math.isfinite(self.one_way_delay) and self.one_way_delay >= 0):
             raise bad("one_way_delay", self.one_way_delay, "a finite number of seconds >= 0")
         if self.line_rate is not None and not (
@@ -153,6 +189,8 @@ class EndpointConfig:
             raise bad("bits_per_char", self.bits_per_char, "5..16 (8N1 = 10)")
         if self.receive_buffer < 2 * MAX_PACKET_LENGTH:
             raise bad("receive_buffer", self.receive_buffer, f">= {2 * MAX_PACKET_LENGTH}")
+        if self.buffer_cap < self.receive_buffer:
+            raise bad("buffer_cap", self.buffer_cap, f">= receive_buffer ({self.receive_buffer})")
         if self.send_buffer is not None and self.send_buffer < 1:
             raise bad("send_buffer", self.send_buffer, "None (derived) or >= 1")
         for name in ("connect_timeout", "dead_after", "linger"):
@@ -192,9 +230,14 @@ class EndpointConfig:
 
     def derived_connect_timeout(self) -> float:
         """``connect_timeout`` or its derived default: 10 initial timeouts, but at
-        least :data:`MIN_CONNECT_TIMEOUT` -- the hints may be missing or wrong,
-        and a peer a light-minute away cannot answer in half a second."""
-        return self.connect_timeout or max(10 * self.initial_timeout(), MIN_CONNECT_TIMEOUT)
+        least :data:`MIN_CONNECT_TIMEOUT` -- the hints may be wrong, and a peer
+        a light-minute away cannot answer in half a second -- or, with no delay
+        hint at all, :data:`UNHINTED_CONNECT_TIMEOUT`."""
+        if self.connect_timeout:
+            return self.connect_timeout
+        if self.one_way_delay == 0:
+            return max(10 * self.initial_timeout(), UNHINTED_CONNECT_TIMEOUT)
+        return max(10 * self.initial_timeout(), MIN_CONNECT_TIMEOUT)
 
     def derived_dead_after(self) -> float:
         """``dead_after`` or its derived default."""
@@ -213,15 +256,24 @@ class EndpointConfig:
         at the first length that fills the line: longer packets only add
         exposure to errors.  At 2400 bit/s it stays 128 up to 3.6 s one way;
         it is 256 at 9600 bit/s and 512 at 19200 bit/s on the Earth-Moon
-        path.
+        path.  When long sequence numbers may be offered (``long_window``
+        set, ``window`` 31) it stops at 512: past that the wide window covers
+        the line, and longer packets would only be hit more often.
         """
         if self.max_packet_length is not None:
             return self.max_packet_length
         if self.line_rate is None:
             return DEFAULT_MAX_PACKET_LENGTH
+        # With long sequence numbers possible the window, not the packet,
+        # covers a longer line: packets stop at 512 (5 % of them hit at a
+        # byte error rate of 1e-4, against 18 % at 2048).
+        longest = (
+            _LONG_WINDOW_LENGTH
+            if self.long_window is not None and self.window == MAX_WINDOW
+            else _DERIVED_LENGTHS[-1]
+        )
         for length in _DERIVED_LENGTHS:
-            tx = self.transmit_time(length + 1)
-            if MAX_WINDOW * tx >= 2 * self.physical_rtt(length + 1) + 2 * tx:
+            if length >= longest or self._window_covers(length):
                 return length
         return _DERIVED_LENGTHS[-1]
 
@@ -242,6 +294,26 @@ class EndpointConfig:
             return _UNKNOWN_RATE_SEND_BUFFER
         per_second = self.line_rate / self.bits_per_char
         return max(2 * self.derived_max_packet_length(), int(per_second * 2 * self.one_way_delay))
+
+    def _window_covers(self, length: int) -> bool:
+        """31 packets of ``length`` keep the hinted line busy through the repair
+        of a loss, ``2 x rtt + 2 x tx`` (PROTOCOL.md 4.6)."""
+        tx = self.transmit_time(length + 1)
+        return MAX_WINDOW * tx >= 2 * self.physical_rtt(length + 1) + 2 * tx
+
+    def needs_long_window(self) -> bool:
+        """Whether a connector offers long sequence numbers (PROTOCOL.md
+        section 9): only when they may be used (``long_window`` set, ``window``
+        31) and 31 packets of the derived length cannot keep the hinted line
+        busy through the repair of a loss -- on a shorter or slower line the
+        two characters they add to every packet would buy nothing.  A
+        listener agrees to a connector's offer."""
+        return (
+            self.long_window is not None
+            and self.window == MAX_WINDOW
+            and self.line_rate is not None
+            and not self._window_covers(self.derived_max_packet_length())
+        )
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

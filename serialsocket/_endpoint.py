@@ -30,13 +30,14 @@ even one whose first resend is lost too, never stalls the window (see
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import deque
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
-from ._config import UNMEASURED_DEAD_AFTER, EndpointConfig
+from ._config import MAX_WINDOW, UNMEASURED_DEAD_AFTER, EndpointConfig
 from ._encoding import PRINTABLE, Encoding
 from ._errors import LocalProtocolError, RemoteProtocolError
 from ._events import (
@@ -50,7 +51,7 @@ from ._events import (
 )
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
-from ._params import InitParameters, Negotiated, negotiate
+from ._params import LONG_SEQ_MODULUS, InitParameters, Negotiated, decode18, encode18, negotiate
 from ._parser import PacketParser, PacketReceived, RejectReason
 from ._receiver import Receiver
 from ._rtt import RttEstimator
@@ -73,11 +74,11 @@ __all__ = ["Endpoint", "EndpointStatistics"]
 
 log = logging.getLogger(__name__)
 
-_INIT_MIN_FIELD = 9
-"""An ACK carrying at least this many data characters is an init answer; data
-ACKs carry two or three (next expected, window, optional poll flag)."""
+_INIT_MIN_FIELD = 12
+"""An ACK carrying at least this many data characters is an init answer (26 or
+more); data ACKs carry two or three (next expected, window, optional poll
+flag), eight or nine with long sequence numbers (PROTOCOL.md section 9)."""
 
-_POLL = ord("P")
 _DAMAGE = frozenset(
     {
         RejectReason.BAD_CHECK,
@@ -88,6 +89,15 @@ _DAMAGE = frozenset(
     }
 )
 _ERROR_TEXT_MAX = 80
+
+LONG_REPAIR_ROUND_TRIPS = 6
+"""Round trips of packets kept unacknowledged with long sequence numbers (the
+classic bound keeps three, see ``_compute_effective_window``)."""
+
+BUFFER_ROUND_TRIPS = LONG_REPAIR_ROUND_TRIPS + 1
+"""Round trips of line data the receive buffer grows to hold (see
+``Endpoint._size_receive_buffer``): those of the repair horizon, and one for
+data delivered but not yet read."""
 
 OUTAGE_ROUND_TRIPS = 2
 """Once the round trip is measured, ``dead_after`` rides out an outage of this
@@ -138,6 +148,14 @@ class EndpointStatistics:
     smoothed_rtt: float | None
     timeout: float
     line_backlog: float
+    long_sequence: bool = False
+    """Long sequence numbers are in use (both ends offered them)."""
+    receive_buffer: int = 0
+    """Bytes the receiver may hold now: the configured ``receive_buffer``, grown
+    with the bandwidth-delay product up to ``buffer_cap``."""
+    buffer_capped: bool = False
+    """The bandwidth-delay product asked for more receive buffer than
+    ``buffer_cap``: the cap, not the line, may limit speed."""
 
 
 class Endpoint:
@@ -175,11 +193,15 @@ class Endpoint:
     _abort_reason: str | None
     _error_sent_at: float
     _init_sent_at: float
+    _first_init_at: float
     _init_transmissions: int
     _answer_sent_at: float
     _answers: int
     _window_key: tuple[int, float | None, int] | None
     _window_cached: int
+    _long_seq: bool
+    _buffer_capped: bool
+    _answer_with: InitParameters | None
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -191,6 +213,7 @@ class Endpoint:
             check=cfg.check,
             encoding=cfg.encoding,
             timeout_hint=cfg.initial_timeout(),
+            long_window=self._long_offer() if cfg.needs_long_window() else None,
         )
         self._parser = PacketParser(
             max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
@@ -485,7 +508,7 @@ class Endpoint:
             effective_window=self._effective_window(),
             peer_window=s.peer_window,
             in_flight=s.in_flight(),
-            retransmit_queue=len(s.retransmit),
+            retransmit_queue=s.retransmit_pending(),
             packets_sent=c["packets_sent"],
             packets_received=c["packets_received"],
             wire_bytes_sent=c["wire_bytes_sent"],
@@ -512,6 +535,9 @@ class Endpoint:
             smoothed_rtt=self._rtt.srtt,
             timeout=self._rtt.timeout(),
             line_backlog=self._pacer.backlog(self._clock),
+            long_sequence=self._long_seq,
+            receive_buffer=r.receive_buffer,
+            buffer_capped=self._buffer_capped,
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -550,11 +576,15 @@ class Endpoint:
         self._abort_reason = None
         self._error_sent_at = -math.inf
         self._init_sent_at = 0.0
+        self._first_init_at = 0.0
         self._init_transmissions = 0
         self._answer_sent_at = 0.0
         self._answers = 0
         self._window_key = None
         self._window_cached = 1
+        self._long_seq = False
+        self._buffer_capped = False
+        self._answer_with = None
 
     def _go(self, trigger: Trigger) -> None:
         old = self._state
@@ -564,6 +594,8 @@ class Endpoint:
     def _send_init(self, now: float) -> None:
         init = Packet(seq=0, type=PacketType.INIT, data=self._mine.encode())
         self._control.append(build_packet(init, BlockCheck.CRC16))
+        if self._init_transmissions == 0:
+            self._first_init_at = now
         self._init_sent_at = now
         self._init_transmissions += 1
         self._init_deadline = now + self._rtt.timeout()
@@ -589,7 +621,16 @@ class Endpoint:
             return
         try:
             theirs = InitParameters.decode(packet.data)
-            agreed = negotiate(self._mine, theirs)
+            mine = self._mine
+            if st is State.LISTEN and theirs.long_window is not None:
+                # The connector judged that its line needs more than 31
+                # packets in flight: agree if we may (a listener often has no
+                # hints of its own).  Not in a simultaneous open, where both
+                # inits are already out and each side must negotiate the
+                # same two offers.
+                mine = dataclasses.replace(mine, long_window=self._long_offer())
+            agreed = negotiate(mine, theirs)
+            self._answer_with = mine
         except RemoteProtocolError as exc:
             log.info("refusing connection: %s", exc)
             self._queue_error(exc.error_hint)
@@ -615,6 +656,15 @@ class Endpoint:
             # The init went out once: its answer is a valid RTT sample (Karn).
             self._rtt.sample(now - self._init_sent_at)
             self._measured()
+        else:
+            # Which copy was answered is unknown, but not the first one's
+            # departure: the round trip is at most the time since.  Too long
+            # rather than too short: without it nothing is measured until a
+            # data packet sent once is acknowledged, and with no hints the
+            # 60 s unmeasured dead_after ended every link whose round trip
+            # is longer (60 s one way: aborted with nothing delivered).
+            self._rtt.seed(now - self._first_init_at)
+            self._measured()
         self._establish(agreed, now, answer=False)
 
     def _establish(self, agreed: Negotiated, now: float, *, answer: bool) -> None:
@@ -629,9 +679,12 @@ class Endpoint:
         self._parser.check = agreed.check
         self._encoding = agreed.encoding
         self._capacity = data_capacity(agreed.send_max_length, agreed.check)
+        self._long_seq = agreed.long_seq
+        self._sender.modulus = self._receiver.modulus = agreed.modulus
         self._sender.window = agreed.window
         self._sender.peer_window = agreed.window
         self._receiver.window = agreed.window
+        self._size_receive_buffer()
         self._receiver.capacity = data_capacity(agreed.receive_max_length, agreed.check)
         self._pacer.full_packet = agreed.send_max_length + 1
         self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
@@ -646,7 +699,8 @@ class Endpoint:
     def _answer_init(self) -> None:
         self._control.append(
             build_packet(
-                Packet(seq=0, type=PacketType.ACK, data=self._mine.encode()), BlockCheck.CRC16
+                Packet(seq=0, type=PacketType.ACK, data=(self._answer_with or self._mine).encode()),
+                BlockCheck.CRC16,
             )
         )
 
@@ -710,44 +764,83 @@ class Endpoint:
         elif ptype == PacketType.ACK:
             if len(packet.data) >= _INIT_MIN_FIELD:
                 self._on_init_answer(packet, now)
-            elif self._state in CONNECTED:
-                self._on_ack(packet, now)
+            elif self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
+                self._on_ack(split[0], split[1], now)
         elif ptype == PacketType.NAK:
-            if self._state is State.ESTABLISHED:
+            if self._state is State.ESTABLISHED and (split := self._split_seq(packet)) is not None:
                 self._counters["naks_received"] += 1
                 acked = self._sender.packets_acked
-                self._sender.on_nak(packet.seq, now, self._nak_horizon())
+                self._sender.on_nak(split[0], now, self._nak_horizon())
                 if self._sender.packets_acked > acked:  # stop-and-wait NAK(n+1) = ACK(n)
                     self._rtt.on_progress()
         elif ptype in (PacketType.DATA, PacketType.EOF):
-            if self._state in CONNECTED:
-                self._on_data(packet, now)
+            if self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
+                self._on_data(split[0], split[1], ptype == PacketType.EOF, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
 
-    def _on_ack(self, packet: Packet, now: float) -> None:
-        data = packet.data
-        cum = unchar(data[0]) % 64 if len(data) >= 1 else None
-        window = min(max(unchar(data[1]), 0), 31) if len(data) >= 2 else None
-        before = set(self._sender.retransmit)
+    def _long_offer(self) -> int | None:
+        """The long window this side may offer: None when it is turned off, or
+        when the window was narrowed below 31 (1 is the paper's stop-and-wait:
+        the window the user wants; long numbers only lift the ceiling)."""
+        cfg = self.config
+        return cfg.long_window if cfg.window == MAX_WINDOW else None
+
+    def _split_seq(self, packet: Packet) -> tuple[int, bytes] | None:
+        """``(sequence number on the wire, the rest of the data field)``.
+
+        With long sequence numbers the data field of D, Z, N and data-Y
+        packets starts with two characters that, before the SEQ character,
+        spell the 18-bit number (PROTOCOL.md section 9).  A packet without
+        them is counted as ignored (None): only a broken peer sends one, and
+        its check was good, so it is not line damage to NAK.
+        """
+        if not self._long_seq:
+            return packet.seq, packet.data
+        n = decode18(packet.data[:2] + bytes((tochar(packet.seq),)))
+        if n is None:
+            self._counters["ignored_packets"] += 1
+            return None
+        return n, packet.data[2:]
+
+    def _seq_fields(self, seq: int) -> tuple[int, bytes]:
+        """``(SEQ, head of the data field)`` that carry sequence number ``seq``."""
+        if not self._long_seq:
+            return seq % 64, b""
+        spelled = encode18(seq % LONG_SEQ_MODULUS)
+        return unchar(spelled[2]), spelled[:2]
+
+    def _on_ack(self, seq: int, data: bytes, now: float) -> None:
+        cum: int | None
+        window: int | None
+        if self._long_seq:
+            cum = decode18(data[:3]) if len(data) >= 3 else None
+            window = decode18(data[3:6]) if len(data) >= 6 else None
+            poll = data[6:7] == b"P"
+        else:
+            cum = unchar(data[0]) % 64 if len(data) >= 1 else None
+            window = max(unchar(data[1]), 0) if len(data) >= 2 else None
+            poll = data[2:3] == b"P"
+        if window is not None:
+            window = min(window, self._sender.window)
+        fast = self._sender.fast_retransmit_count
         acked = self._sender.packets_acked
-        samples = self._sender.on_ack(packet.seq, cum, window, now)
+        samples = self._sender.on_ack(seq, cum, window, now)
         for rtt in samples:
             self._rtt.sample(rtt)
         if samples:
             self._measured()
         if self._sender.packets_acked > acked:
             self._rtt.on_progress()
-        if set(self._sender.retransmit) - before:
+        if self._sender.fast_retransmit_count > fast:
             self._counters["fast_retransmits"] += 1
-        if len(data) >= 3 and data[2] == _POLL:
+        if poll:
             self._queue_ack(self._receiver.last_in_order())
         self._check_closed(now)
 
-    def _on_data(self, packet: Packet, now: float) -> None:
+    def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
         self._peer_data_seen = True
-        eof = packet.type == PacketType.EOF
-        arrival = self._receiver.on_packet(packet.seq, packet.data, eof, now, self._rtt.timeout())
+        arrival = self._receiver.on_packet(seq, data, eof, now, self._rtt.timeout())
         if self._receiver.discard and arrival.fields and self._state is State.ESTABLISHED:
             self._finish_abort("Connection closed: data refused", by_peer=False, send=True)
             return
@@ -808,17 +901,23 @@ class Endpoint:
     def _queue_ack(self, seq_mod: int, *, poll: bool = False) -> None:
         window = self._receiver.window_to_advertise()
         self._receiver.advertised = window
-        data = bytes((tochar(self._receiver.expected % 64), tochar(window)))
+        seq, head = self._seq_fields(seq_mod)
+        if self._long_seq:
+            expected = encode18(self._receiver.expected % LONG_SEQ_MODULUS)
+            data = head + expected + encode18(window)
+        else:
+            data = bytes((tochar(self._receiver.expected % 64), tochar(window)))
         if poll:
             data += b"P"
         self._control.append(
-            build_packet(Packet(seq=seq_mod, type=PacketType.ACK, data=data), self._send_check)
+            build_packet(Packet(seq=seq, type=PacketType.ACK, data=data), self._send_check)
         )
 
     def _queue_nak(self, seq_mod: int) -> None:
         self._counters["naks_sent"] += 1
+        seq, head = self._seq_fields(seq_mod)
         self._control.append(
-            build_packet(Packet(seq=seq_mod, type=PacketType.NAK), self._send_check)
+            build_packet(Packet(seq=seq, type=PacketType.NAK, data=head), self._send_check)
         )
 
     def _account(self, wire: bytes, now: float) -> float:
@@ -835,7 +934,7 @@ class Endpoint:
 
     def _pacing_wake(self) -> float | None:
         s = self._sender
-        wants = bool(s.retransmit) or (s.has_new_data() and s.room(self._effective_window()) > 0)
+        wants = s.has_retransmit() or (s.has_new_data() and s.room(self._effective_window()) > 0)
         if not wants:
             return None
         return self._pacer.wake()
@@ -843,11 +942,12 @@ class Endpoint:
     def _release_data(self, now: float, out: list[bytes]) -> None:
         s = self._sender
         timeout = self._rtt.timeout()
-        while s.retransmit and self._pacer.has_room(now):
-            pkt = s.outstanding[s.retransmit.popleft()]
+        while s.has_retransmit() and self._pacer.has_room(now):
+            pkt = s.pop_retransmit()
+            assert pkt is not None
             self._counters["retransmissions"] += 1
             self._transmit(pkt, now, timeout, out)
-        if s.retransmit:
+        if s.has_retransmit():
             return
         while self._pacer.has_room(now):
             room = s.room(self._effective_window())
@@ -855,21 +955,28 @@ class Endpoint:
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
-                for field, used in self._encoding.encode_fields(s.queue, self._capacity, batch):
+                # With long sequence numbers two characters of each data field
+                # carry the high bits: the capacity for data is two less.
+                capacity = self._capacity - 2 if self._long_seq else self._capacity
+                for field, used in self._encoding.encode_fields(s.queue, capacity, batch):
+                    seq, head = self._seq_fields(s.next)
                     wire = build_packet(
-                        Packet(seq=s.next % 64, type=PacketType.DATA, data=field), self._send_check
+                        Packet(seq=seq, type=PacketType.DATA, data=head + field), self._send_check
                     )
                     del s.queue[:used]
                     self._transmit(s.add(wire, used, eof=False), now, timeout, out)
             else:
-                wire = build_packet(Packet(seq=s.next % 64, type=PacketType.EOF), self._send_check)
+                seq, head = self._seq_fields(s.next)
+                wire = build_packet(
+                    Packet(seq=seq, type=PacketType.EOF, data=head), self._send_check
+                )
                 self._transmit(s.add(wire, 0, eof=True), now, timeout, out)
 
     def _transmit(self, pkt: Outstanding, now: float, timeout: float, out: list[bytes]) -> None:
         out.append(pkt.wire)
         pkt.transmissions += 1
         pkt.done_at = self._account(pkt.wire, now)
-        pkt.deadline = pkt.done_at + timeout
+        self._sender.arm(pkt, pkt.done_at + timeout)
 
     # -- internals: timing --------------------------------------------------------------
 
@@ -945,9 +1052,32 @@ class Endpoint:
         return min(slow, self._dead_after / 2)
 
     def _measured(self) -> None:
-        """A round trip was measured: liveness and backoff follow the path, not the hints."""
+        """A round trip was measured: liveness, backoff and the receive buffer
+        follow the path, not the hints."""
         self._dead_after = self._liveness()
         self._rtt.ceiling = self._ceiling()
+        if self._negotiated is not None:
+            self._size_receive_buffer()
+
+    def _size_receive_buffer(self) -> None:
+        """Grow the receive buffer to :data:`BUFFER_ROUND_TRIPS` of the line's
+        bandwidth-delay product (at least ``receive_buffer``, at most
+        ``buffer_cap``; never shrunk, so no advertised window is taken back).
+
+        The sender keeps up to three round trips of packets unacknowledged to
+        ride out the repair of a loss (PROTOCOL.md 4.6), and everything after
+        a lost packet waits here until the repair arrives: a buffer smaller
+        than that closes the window on a long fast line (Mars: 2400 bit/s
+        and a 40-minute round trip is 576 kB a round trip).
+        """
+        cfg = self.config
+        want = cfg.receive_buffer
+        if cfg.line_rate is not None:
+            rtt = max(self._rtt.srtt or 0.0, 2 * cfg.one_way_delay)
+            need = int(BUFFER_ROUND_TRIPS * cfg.line_rate / cfg.bits_per_char * rtt)
+            self._buffer_capped = need > cfg.buffer_cap
+            want = max(want, min(need, cfg.buffer_cap))
+        self._receiver.receive_buffer = max(self._receiver.receive_buffer, want)
 
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue
@@ -971,9 +1101,22 @@ class Endpoint:
         honoured.  (The physical round trip of a full packet is too long by the
         packet's own transmit time: it made every NAK for a damaged packet
         arrive just too early, and stop-and-wait waited for the timeout.)
+
+        Neither end waits for a CR: the peer rejects the copy at its last
+        check character, one character before the CR that ``done_at``
+        includes, and our parser completes the NAK at its own last check
+        character.  Counting both CRs set the horizon two character times
+        late, and on a line without jitter every NAK about a damaged packet
+        was ignored (a timeout repaired it instead; found by the Wireshark
+        dissector).  The NAK carries the two-character head of long sequence
+        numbers when they are in use.
         """
-        nak = len(build_packet(Packet(seq=0, type=PacketType.NAK), self._send_check))
-        return 2 * self.config.one_way_delay + self.config.transmit_time(nak) - TIME_EPSILON
+        head = b"  " if self._long_seq else b""
+        nak = len(build_packet(Packet(seq=0, type=PacketType.NAK, data=head), self._send_check))
+        cr = self.config.transmit_time(1)
+        return (
+            2 * self.config.one_way_delay + self.config.transmit_time(nak) - 2 * cr - TIME_EPSILON
+        )
 
     def _effective_window(self) -> int:
         key = (self._sender.window, self._rtt.srtt, self._full_wire)
@@ -986,7 +1129,10 @@ class Endpoint:
         window = self._sender.window
         tx = self.config.transmit_time(self._full_wire)
         if tx <= 0:
-            return window
+            # Rate unknown: nothing says how much the line holds, so no more
+            # than the classic 31 packets go out unacknowledged, whatever
+            # long sequence numbers would allow.
+            return min(window, MAX_WINDOW)
         rtt = max(self._rtt.srtt if self._rtt.srtt is not None else 0.0, self._min_rtt())
         # The window must outlast the repair of a loss, or the line idles.
         # Packet k (first sent from T - tx to T) is lost; the next packet's
@@ -999,7 +1145,14 @@ class Endpoint:
         # trip and two packets later: 3 rtt + 4 tx.  One packet more absorbs
         # reading in batches and rounding.  Pacing keeps the UART queue at
         # two packets, so these packets are on the line, not in a tty buffer.
-        bdp = math.ceil(3 * rtt / tx) + 5
+        #
+        # With long sequence numbers the window may reach further: a packet
+        # lost twice (1 in 20 losses with 512-character packets at 1e-4)
+        # holds the window's base for three round trips, and at Mars distance
+        # each round trip the line idles is 40 minutes.  LONG_REPAIR_ROUND_TRIPS
+        # covers a resend lost twice; the receive buffer grows to match.
+        trips = LONG_REPAIR_ROUND_TRIPS if self._long_seq else 3
+        bdp = math.ceil(trips * rtt / tx) + 5
         return max(1, min(window, bdp))
 
     def _next_probe_time(self) -> float:

@@ -27,10 +27,17 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
  20   WHATAMI2   tochar(32)
  21   VERSION    tochar(protocol version)
  22   TIMEOUT    three base-95 chars: the initial timeout hint in milliseconds
+ 23   XCAPAS     tochar(extensions offered): 1 = long sequence numbers
+ 24   XWINDO     three chars, tochar of 6 bits each, most significant first:
+                 the window offered with long sequence numbers (with XCAPAS 1)
 ====  =========  ==========================================================
 
 MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
 through CHECK, so n = length - 7 exactly, with no hidden safety margin.
+
+XCAPAS and XWINDO (PROTOCOL.md section 9) extend protocol version 1
+compatibly: an endpoint that stops reading after TIMEOUT sees no extension
+offered, and an extension is used only when both sides offer it.
 """
 
 from __future__ import annotations
@@ -42,13 +49,47 @@ from ._encoding import Encoding
 from ._errors import RemoteProtocolError
 from ._wire import MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
 
-__all__ = ["PROTOCOL_VERSION", "InitParameters", "Negotiated", "negotiate"]
+__all__ = [
+    "LONG_SEQ_MODULUS",
+    "MAX_LONG_WINDOW",
+    "PROTOCOL_VERSION",
+    "InitParameters",
+    "Negotiated",
+    "decode18",
+    "encode18",
+    "negotiate",
+]
 
 PROTOCOL_VERSION = 1
 """Bumped on any incompatible change to the wire protocol in PROTOCOL.md."""
 
+LONG_SEQ_MODULUS = 64**3
+"""Sequence numbers are mod 262144 (18 bits) when both sides offer long ones:
+the packet's SEQ character carries the low 6 bits, two characters at the head
+of the data field the rest (PROTOCOL.md section 9)."""
+
+MAX_LONG_WINDOW = LONG_SEQ_MODULUS // 2 - 1
+"""Largest window with long sequence numbers: less than half the space, so a
+receiver tells the current window from the previous one (131071 packets)."""
+
 _CAP_MORE, _CAP_LONG, _CAP_WINDOWS = 1, 2, 4
+_XCAP_LONG_SEQ = 1
 _SYSID = b"TL"
+
+
+def encode18(n: int) -> bytes:
+    """Three printable characters for an 18-bit number, most significant first."""
+    return bytes((tochar(n >> 12 & 63), tochar(n >> 6 & 63), tochar(n & 63)))
+
+
+def decode18(chars: bytes | bytearray | memoryview) -> int | None:
+    """The number three :func:`encode18` characters carry, or None if any is not one."""
+    if len(chars) != 3:
+        return None
+    a, b, c = (unchar(x) for x in chars)
+    if not (0 <= a < 64 and 0 <= b < 64 and 0 <= c < 64):
+        return None
+    return a << 12 | b << 6 | c
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,6 +107,8 @@ class InitParameters:
         timeout_hint: my initial timeout in seconds (telelink field; None from
             other Kermits).
         version: telelink protocol version, or None for a non-telelink peer.
+        long_window: the window I offer with long sequence numbers
+            (1..:data:`MAX_LONG_WINDOW`), or None: I do not offer them.
     """
 
     max_packet_length: int
@@ -77,6 +120,7 @@ class InitParameters:
     qctl: int = ord("#")
     timeout_hint: float | None = None
     version: int | None = PROTOCOL_VERSION
+    long_window: int | None = None
 
     @classmethod
     def mine(
@@ -87,6 +131,7 @@ class InitParameters:
         check: BlockCheck,
         encoding: Encoding,
         timeout_hint: float,
+        long_window: int | None = None,
     ) -> InitParameters:
         """The parameters an endpoint with this configuration offers."""
         return cls(
@@ -98,6 +143,7 @@ class InitParameters:
             rept=encoding.rept,
             qctl=encoding.qctl,
             timeout_hint=timeout_hint,
+            long_window=long_window,
         )
 
     def encode(self) -> bytes:
@@ -129,6 +175,8 @@ class InitParameters:
             tochar(ms // 95 % 95),
             tochar(ms % 95),
         ]
+        if self.long_window is not None:  # without an offer the init stays 26 characters
+            fields += [tochar(_XCAP_LONG_SEQ), *encode18(self.long_window)]
         return bytes(fields)
 
     @classmethod
@@ -185,6 +233,7 @@ class InitParameters:
         j = i + 3 + 1 + 3 + 1  # CHKPNT, CHKINT, WHATAMI
         version = None
         timeout_hint = None
+        long_window = None
         if j < len(data):
             sysid_len = unchar(data[j])
             sysid = data[j + 1 : j + 1 + sysid_len]
@@ -195,6 +244,14 @@ class InitParameters:
                 if min(a, b, c) < 0 or max(a, b, c) > 94:
                     raise bad("TIMEOUT")
                 timeout_hint = (a * 9025 + b * 95 + c) / 1000
+                if k + 4 < len(data):
+                    xcaps = unchar(data[k + 4])
+                    if not 0 <= xcaps <= 94:
+                        raise bad("XCAPAS")
+                    if xcaps & _XCAP_LONG_SEQ:
+                        long_window = decode18(data[k + 5 : k + 8])
+                        if long_window is None or not 1 <= long_window <= MAX_LONG_WINDOW:
+                            raise bad("XWINDO")
         return cls(
             max_packet_length=max(max_len, MIN_PACKET_LENGTH),
             window=window,
@@ -205,6 +262,7 @@ class InitParameters:
             qctl=qctl,
             timeout_hint=timeout_hint,
             version=version,
+            long_window=long_window,
         )
 
 
@@ -215,10 +273,13 @@ class Negotiated:
     Attributes:
         send_max_length: largest packet we send (the peer's receive limit).
         receive_max_length: largest packet we accept (ours).
-        window: the smaller of the two offers.
+        window: the smaller of the two offers (of the long windows when
+            both offer long sequence numbers).
         check: block check on every packet after the exchange.
         encoding: the prefix profile both directions use.
         peer: the peer's parameters as received.
+        long_seq: both offered long sequence numbers: they are mod
+            :data:`LONG_SEQ_MODULUS` on the wire (PROTOCOL.md section 9).
     """
 
     send_max_length: int
@@ -227,6 +288,12 @@ class Negotiated:
     check: BlockCheck
     encoding: Encoding
     peer: InitParameters
+    long_seq: bool = False
+
+    @property
+    def modulus(self) -> int:
+        """The sequence number space on the wire: 64, or 262144 with long numbers."""
+        return LONG_SEQ_MODULUS if self.long_seq else 64
 
 
 def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
@@ -268,11 +335,17 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
             error_hint="Control prefix mismatch",
         )
     encoding = Encoding(qctl=mine.qctl, qbin=qbin, rept=rept)
+    long_seq = mine.long_window is not None and theirs.long_window is not None
+    if mine.long_window is not None and theirs.long_window is not None:
+        window = min(mine.long_window, theirs.long_window)
+    else:
+        window = min(mine.window, theirs.window)
     return Negotiated(
         send_max_length=theirs.max_packet_length,
         receive_max_length=mine.max_packet_length,
-        window=min(mine.window, theirs.window),
+        window=window,
         check=check,
         encoding=encoding,
         peer=theirs,
+        long_seq=long_seq,
     )

@@ -5,10 +5,13 @@ Theory of operation
 ``expected`` is the lowest sequence number not yet received.  A packet with
 wire number ``s`` is classified against it (C-Kermit's chkwin, ckcfn3.c):
 
-* ``(s - expected) mod 64 < window``: in the current window.  Buffered
+* ``(s - expected) mod M < window``: in the current window.  Buffered
   (once: a duplicate is only re-acknowledged) and acknowledged.
-* ``(s - expected) mod 64 >= 64 - window``: the previous window, an old
+* ``(s - expected) mod M >= M - window``: the previous window, an old
   duplicate whose ACK was lost.  Re-acknowledged, never delivered again.
+
+``M`` is the wire's sequence space: 64, or 262144 with long sequence numbers
+(the window is always less than half of it).
 * anything else: impossible for a correct peer; counted and ignored.
 
 Packets are delivered in order as soon as ``expected`` is present, so every
@@ -41,8 +44,8 @@ class Arrival:
     """What the endpoint must do after a data or EOF packet arrived.
 
     Attributes:
-        ack: sequence number (mod 64) to acknowledge, or None.
-        nak: sequence number (mod 64) to NAK, or None.
+        ack: sequence number (mod the wire's space) to acknowledge, or None.
+        nak: sequence number (mod the wire's space) to NAK, or None.
         delivered: bytes newly readable.
         eof: the peer's EOF was delivered by this arrival.
         classification: ``new``, ``duplicate``, ``old``, ``outside`` or ``full``.
@@ -66,6 +69,8 @@ class Receiver:
         self.receive_buffer = receive_buffer
         self.window = window
         self.capacity = capacity
+        self.modulus = 64
+        """The wire's sequence space: 64, or 262144 with long sequence numbers."""
         self.expected = 1
         self.buffered: dict[int, bytes | None] = {}
         self.buffered_bytes = 0
@@ -80,11 +85,11 @@ class Receiver:
     # -- classification ------------------------------------------------------------
 
     def _resolve(self, seq_mod: int) -> tuple[str, int]:
-        offset = (seq_mod - self.expected) % 64
+        offset = (seq_mod - self.expected) % self.modulus
         if offset < self.window:
             return "new", self.expected + offset
-        if offset >= 64 - self.window:
-            return "old", self.expected - (64 - offset)
+        if offset >= self.modulus - self.window:
+            return "old", self.expected - (self.modulus - offset)
         return "outside", -1
 
     def on_packet(
@@ -160,12 +165,12 @@ class Receiver:
                 continue
             if now - self.naked.get(seq, -float("inf")) >= nak_after:
                 self.naked[seq] = now
-                return seq % 64
+                return seq % self.modulus
         if upto is None and not self.eof:
             seq = self.expected
             if now - self.naked.get(seq, -float("inf")) >= nak_after:
                 self.naked[seq] = now
-                return seq % 64
+                return seq % self.modulus
         return None
 
     # -- flow control ------------------------------------------------------------------
@@ -189,4 +194,4 @@ class Receiver:
 
     def last_in_order(self) -> int:
         """The sequence number (mod 64) of the last packet delivered in order."""
-        return (self.expected - 1) % 64
+        return (self.expected - 1) % self.modulus

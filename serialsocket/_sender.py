@@ -2,10 +2,11 @@
 
 Theory of operation
 -------------------
-Sequence numbers are kept *absolute* (1, 2, 3, ...) inside and reduced mod 64
-only on the wire.  An ACK or NAK carrying ``s mod 64`` is mapped back to the
-one outstanding packet it can mean: outstanding packets span fewer than 32
-numbers, so the mapping is unique.
+Sequence numbers are kept *absolute* (1, 2, 3, ...) inside and reduced mod
+``modulus`` (64, or 262144 with long sequence numbers) only on the wire.  An
+ACK or NAK carrying ``s mod modulus`` is mapped back to the one outstanding
+packet it can mean: outstanding packets span fewer than half the space, so
+the mapping is unique.
 
 A packet is acknowledged three ways:
 
@@ -21,10 +22,16 @@ A packet is retransmitted when
 * the peer NAKs it, unless the NAK came too soon to be about our last copy;
 * an ACK shows the peer holds a later packet but still expects this one
   (fast retransmit: a serial line never reorders, so the packet was lost).
+
+With long sequence numbers thousands of packets may be outstanding, so no
+per-event operation walks them all: unacknowledged packets are counted, the
+retransmission timers sit in a heap, and the retransmission queue drops
+packets acknowledged meanwhile lazily, when they reach its head.
 """
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from dataclasses import dataclass
 
@@ -65,10 +72,21 @@ class Sender:
         self.base = 1
         self.next = 1
         self.window = 1
+        self.modulus = 64
+        """The wire's sequence space: 64, or 262144 with long sequence numbers."""
         self.peer_cum = 1
         self.peer_window = 1
         self.outstanding: dict[int, Outstanding] = {}
         self.retransmit: deque[int] = deque()
+        """Packets to send again, in sequence order; may hold packets
+        acknowledged since they were queued (skipped by :meth:`pop_retransmit`)."""
+        self._queued: set[int] = set()
+        self._timers: list[tuple[float, int]] = []
+        """Heap of (deadline, seq); an entry is stale once its packet is
+        acknowledged, queued again, or re-armed with another deadline."""
+        self._unacked = 0
+        self.fast_retransmit_count = 0
+        """Packets queued again because a later packet's ACK proved them lost."""
         self.eof_requested = False
         self.eof_sent = False
         self.eof_acked = False
@@ -92,7 +110,7 @@ class Sender:
 
     def in_flight(self) -> int:
         """Packets sent and not yet acknowledged."""
-        return sum(1 for p in self.outstanding.values() if not p.acked)
+        return self._unacked
 
     def room(self, limit: int) -> int:
         """New packets the windows allow now.
@@ -114,6 +132,7 @@ class Sender:
         pkt = Outstanding(seq=self.next, wire=wire, payload=payload, eof=eof)
         self.outstanding[self.next] = pkt
         self.next += 1
+        self._unacked += 1
         self.bytes_in_flight += payload
         if eof:
             self.eof_sent = True
@@ -121,7 +140,7 @@ class Sender:
 
     def resolve(self, seq_mod: int) -> int | None:
         """The absolute number of an outstanding packet with this wire seq, if any."""
-        offset = (seq_mod - self.base) % 64
+        offset = (seq_mod - self.base) % self.modulus
         return self.base + offset if offset < self.next - self.base else None
 
     # -- acknowledgements -------------------------------------------------------------
@@ -133,7 +152,7 @@ class Sender:
 
         Args:
             seq_mod: the ACK's sequence number (the packet it acknowledges).
-            cum_mod: the peer's next expected sequence number, mod 64.
+            cum_mod: the peer's next expected sequence number, mod ``modulus``.
             window: packets the peer can accept beyond ``cum``.
             now: arrival time.
         """
@@ -142,7 +161,7 @@ class Sender:
         if seq is not None:
             self._ack_one(seq, now, samples)
         if cum_mod is not None:
-            offset = (cum_mod - self.base) % 64
+            offset = (cum_mod - self.base) % self.modulus
             if offset <= self.next - self.base:
                 cum = self.base + offset
                 for s in range(self.base, cum):
@@ -162,8 +181,10 @@ class Sender:
                     and later.seq > lost.seq
                     and lost.done_at <= later.done_at
                     and lost.deadline is not None
+                    and lost.seq not in self._queued
                 ):
                     self.schedule(lost.seq)
+                    self.fast_retransmit_count += 1
         self._slide()
         return samples
 
@@ -179,7 +200,11 @@ class Sender:
         """
         seq = self.resolve(seq_mod)
         if seq is None:
-            if self.window == 1 and seq_mod == self.next % 64 and self.next - 1 in self.outstanding:
+            if (
+                self.window == 1
+                and seq_mod == self.next % self.modulus
+                and self.next - 1 in self.outstanding
+            ):
                 # Stop-and-wait: NAK(n+1) = ACK(n) (seed 003; Kermit ckcfn2.c input()).
                 # It also says the peer now expects n+1, exactly as an ACK's
                 # cumulative field would: without advancing peer_cum, room()
@@ -199,6 +224,7 @@ class Sender:
         if pkt is None or pkt.acked:
             return
         pkt.acked = True
+        self._unacked -= 1
         self.packets_acked += 1
         self.bytes_acked += pkt.payload
         self.bytes_in_flight -= pkt.payload
@@ -213,42 +239,81 @@ class Sender:
             if self.outstanding.pop(self.base).eof:
                 self.eof_acked = True
             self.base += 1
-        if self.retransmit:
-            self.retransmit = deque(
-                s
-                for s in self.retransmit
-                if s in self.outstanding and not self.outstanding[s].acked
-            )
+        self._drop_stale_head()
+
+    def _drop_stale_head(self) -> None:
+        """Forget queued retransmissions at the head that were acknowledged meanwhile."""
+        while self.retransmit:
+            pkt = self.outstanding.get(self.retransmit[0])
+            if pkt is not None and not pkt.acked:
+                return
+            self._queued.discard(self.retransmit.popleft())
 
     # -- retransmission --------------------------------------------------------------
 
     def schedule(self, seq: int) -> None:
         """Queue a packet for retransmission (once, in sequence order)."""
-        if seq in self.retransmit:
+        if seq in self._queued:
             return
+        self._queued.add(seq)
         self.retransmit.append(seq)
         if len(self.retransmit) > 1 and self.retransmit[-2] > seq:
             self.retransmit = deque(sorted(self.retransmit))
 
+    def has_retransmit(self) -> bool:
+        """A packet waits to be sent again."""
+        self._drop_stale_head()
+        return bool(self.retransmit)
+
+    def pop_retransmit(self) -> Outstanding | None:
+        """The next packet to send again (oldest first), or None."""
+        self._drop_stale_head()
+        if not self.retransmit:
+            return None
+        seq = self.retransmit.popleft()
+        self._queued.discard(seq)
+        return self.outstanding[seq]
+
+    def retransmit_pending(self) -> int:
+        """Packets queued to be sent again and still unacknowledged."""
+        return sum(1 for s in self.retransmit if not self._stale(s))
+
+    def _stale(self, seq: int) -> bool:
+        pkt = self.outstanding.get(seq)
+        return pkt is None or pkt.acked
+
+    def arm(self, pkt: Outstanding, deadline: float) -> None:
+        """Start (or restart) ``pkt``'s retransmission timer."""
+        pkt.deadline = deadline
+        heapq.heappush(self._timers, (deadline, pkt.seq))
+
+    def _timer_valid(self, deadline: float, seq: int) -> bool:
+        pkt = self.outstanding.get(seq)
+        return (
+            pkt is not None
+            and not pkt.acked
+            and pkt.deadline == deadline
+            and seq not in self._queued
+        )
+
     def expired(self, now: float) -> list[int]:
-        """Unacknowledged packets whose timer has fired and are not yet queued again."""
-        return [
-            p.seq
-            for p in self.outstanding.values()
-            if not p.acked
-            and p.deadline is not None
-            and p.deadline <= now
-            and p.seq not in self.retransmit
-        ]
+        """Unacknowledged packets whose timer has fired and are not yet queued
+        again, oldest deadline first.  The caller queues each (or gives up):
+        their timers are spent."""
+        out: list[int] = []
+        timers = self._timers
+        while timers and timers[0][0] <= now:
+            deadline, seq = heapq.heappop(timers)
+            if self._timer_valid(deadline, seq):
+                out.append(seq)
+        return out
 
     def next_deadline(self) -> float | None:
         """The earliest retransmission deadline among packets on the line."""
-        deadlines = [
-            p.deadline
-            for p in self.outstanding.values()
-            if not p.acked and p.deadline is not None and p.seq not in self.retransmit
-        ]
-        return min(deadlines) if deadlines else None
+        timers = self._timers
+        while timers and not self._timer_valid(*timers[0]):
+            heapq.heappop(timers)
+        return timers[0][0] if timers else None
 
     def unsent_bytes(self) -> int:
         """Bytes queued by the application that never left."""

@@ -19,6 +19,7 @@ import sys
 
 from linksim.arm import DEFAULT_WORLD, WorldConfig
 from serialsocket import MAX_WINDOW
+from serialsocket import argtypes as serial_args
 from serialsocket.argtypes import FloatRange, IntRange, SerialPortName
 from serialsocket.packets import MAX_PACKET_LENGTH
 from tcpstream import load_key_file
@@ -58,9 +59,6 @@ MAX_SECONDS = 30 * 86400.0
 MAX_DELAY = 3600.0
 """Longest one-way delay: an hour (Mars at conjunction is 22 minutes)."""
 
-_MIN_ENDPOINT_PACKET_LENGTH = 33
-"""serialsocket's EndpointConfig floor: its init packet must fit (tests pin the two equal)."""
-
 BAUD = IntRange(1, 100_000_000)
 """bit/s of a serial port; far above any UART (FTDI chips top out at 12 Mbaud)."""
 BIT_RATE = FloatRange(0.0, 1e9, lo_open=True, unit="bit/s")
@@ -68,7 +66,7 @@ BIT_RATE = FloatRange(0.0, 1e9, lo_open=True, unit="bit/s")
 BITS_PER_CHAR = IntRange(1, 64)
 """As DirectionConfig takes (8N1 = 10)."""
 WINDOW = IntRange(1, MAX_WINDOW)
-ENDPOINT_LENGTH = IntRange(_MIN_ENDPOINT_PACKET_LENGTH, MAX_PACKET_LENGTH)
+ENDPOINT_LENGTH = serial_args.ENDPOINT_LENGTH
 KERMIT_LENGTH = IntRange(12, MAX_PACKET_LENGTH)
 """A Kermit packet, MARK through CHECK (12: the shortest Send-Init)."""
 PROBABILITY = FloatRange(0.0, 1.0)

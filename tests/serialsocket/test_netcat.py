@@ -99,7 +99,7 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     assert got_up == upload
     assert client.stdout == download
     trace = client.stderr.decode()
-    assert "tx I seq=0 len=33" in trace  # the connect request
+    assert "tx I seq=0 len=33" in trace  # the connect request (--window 8: no long-sequence offer)
     assert "rx Y seq=0" in trace  # its answer
     assert "tx D seq=1 len=128" in trace
     # --json: the counters at the end, on stderr (stdout is the data).

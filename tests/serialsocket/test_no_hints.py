@@ -15,7 +15,11 @@ import pytest
 
 from linksim.bench._transfer import simulate
 from serialsocket import EndpointConfig
-from serialsocket._config import MIN_CONNECT_TIMEOUT, UNMEASURED_DEAD_AFTER
+from serialsocket._config import (
+    MIN_CONNECT_TIMEOUT,
+    UNHINTED_CONNECT_TIMEOUT,
+    UNMEASURED_DEAD_AFTER,
+)
 from serialsocket._rtt import RttEstimator
 from serialsocket.packets import PRINTABLE
 
@@ -61,7 +65,10 @@ def test_no_hints_still_delivers_at_twenty_seconds_one_way() -> None:
 
 
 def test_the_derived_connect_timeout_is_minutes() -> None:
-    assert EndpointConfig().derived_connect_timeout() == MIN_CONNECT_TIMEOUT >= 120
+    # No delay hint: nothing says the peer is not at Mars (a 45-minute round trip).
+    assert EndpointConfig().derived_connect_timeout() == UNHINTED_CONNECT_TIMEOUT >= 2700
+    hinted = EndpointConfig(one_way_delay=0.05, line_rate=2400)
+    assert hinted.derived_connect_timeout() == MIN_CONNECT_TIMEOUT >= 120
     assert EndpointConfig(connect_timeout=0.5).derived_connect_timeout() == 0.5
 
 
