@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed-stamp
 RUN_STAMP := $(VENV)/.installed-run-stamp
 PKGS   := serialsocket tcpstream linksim
 
-.PHONY: demo docs test lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
+.PHONY: demo docs test test-long lint typecheck pytest fuzz fuzz-install soak bench bench-codec bench-goodput bench-pty bench-latency bench-flood clean
 
 $(RUN_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,11 @@ typecheck: $(STAMP)
 
 pytest: $(STAMP)
 	$(PY) -m pytest -q
+
+# Deterministic checks too long for the default run (minutes each): trio's
+# stream conformance over the Mars preset.
+test-long: $(STAMP)
+	$(PY) -m pytest -q -m long --timeout 900
 
 # `make fuzz` runs the hypothesis property fuzzers, then each coverage-guided
 # atheris harness for FUZZ_SECONDS (default 60; the issue-11 runs used 600),

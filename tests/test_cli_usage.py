@@ -33,5 +33,6 @@ def test_an_unknown_option_shows_its_subcommand_s_usage(
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     usage = err.splitlines()[0]
-    assert usage.startswith("usage: ") and f"{command} [-h]" in usage, err
+    assert usage.startswith("usage: "), err
+    assert f"{command} [-h]" in usage, err
     assert f"{command}: error: unrecognized arguments: --bogus" in err

@@ -35,9 +35,11 @@ from ._relay import measure as measure_relay
 from ._soak import SoakReport, run_soak
 from ._soak import check as check_soak
 from ._summary import summarize
+from ._transfer import HINTS as GOODPUT_HINTS
 from ._transfer import PROFILES as GOODPUT_PROFILES
 
 __all__ = [
+    "GOODPUT_HINTS",
     "GOODPUT_PROFILES",
     "KERMIT_PAIRS",
     "LATENCY_TRANSPORTS",

@@ -32,12 +32,13 @@ from typing import Any
 
 from ._grid import (
     BASE,
+    DEFAULT_SWEEPS,
     QUICK,
     ROW_KEYS,
-    SWEEPS,
     Point,
     auto_packet_length,
     build_grid,
+    derived_point,
     make_payload,
 )
 from ._transfer import BENCH_BURST, PROFILES, limit_goodput, simulate
@@ -183,9 +184,10 @@ def custom_grid(
     bers: Sequence[float] | None = None,
     burst: bool = False,
     windows: Sequence[int] | None = None,
-    lengths: Sequence[int | str] | None = None,
+    lengths: Sequence[int | str | None] | None = None,
     payloads: Sequence[str] | None = None,
     profiles: Sequence[str] | None = None,
+    hints: Sequence[str] | None = None,
     size: int | None = None,
     seed: int = 1,
 ) -> list[tuple[Point, list[str]]] | None:
@@ -195,18 +197,19 @@ def custom_grid(
     automatic packet length for the point.
     """
     profiles = list(profiles or [])
-    given = (rates, delays, bers, windows, lengths, payloads)
+    given = (rates, delays, bers, windows, lengths, payloads, hints)
     if not any(given) and not profiles and not burst:
         return None
     points: list[Point] = []
-    for rate, delay, ber, window, length, kind, prof in itertools.product(
+    for rate, delay, ber, window, length, kind, prof, hint in itertools.product(
         rates or [BASE.baud],
         delays or [BASE.delay],
         bers or [BASE.ber],
         windows or [BASE.window],
-        lengths or [BASE.max_len],
+        lengths or [None],
         payloads or [BASE.payload],
         profiles or [BASE.profile],
+        hints or [BASE.hints],
     ):
         p = replace(
             BASE,
@@ -219,12 +222,16 @@ def custom_grid(
             profile=prof,
             size=size,
             seed=seed,
+            hints=hint,
         )
-        if length == "auto":
+        if length is None and hints:
+            # Hints given, no length: the length the endpoints derive from them.
+            p = derived_point(p)
+        elif length == "auto":
             n = auto_packet_length(rate, delay, ber, window=window, profile=prof, burst=burst)
             p = replace(p, max_len=n, auto_len=True)
         else:
-            p = replace(p, max_len=int(length))
+            p = replace(p, max_len=int(length if length is not None else BASE.max_len))
         points.append(p)
     return [(p, ["custom"]) for p in dict.fromkeys(points)]
 
@@ -240,7 +247,7 @@ def standard_grid(
     if quick:
         chosen: Sequence[Any] = [("quick", QUICK[1])]
     else:
-        chosen = sweeps or list(SWEEPS)
+        chosen = sweeps or list(DEFAULT_SWEEPS)
     return build_grid(chosen, size=size, seed=seed)
 
 

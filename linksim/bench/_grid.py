@@ -35,7 +35,9 @@ from ._codec import sample_payload
 from ._transfer import (
     BENCH_BURST,
     BITS_PER_CHAR,
+    HINTS,
     PROFILES,
+    hinted,
     limit_goodput,
     mean_byte_error_rate,
     packet_error_probability,
@@ -45,6 +47,7 @@ from ._transfer import (
 
 __all__ = [
     "BASE",
+    "DEFAULT_SWEEPS",
     "QUICK",
     "ROW_KEYS",
     "SWEEPS",
@@ -115,6 +118,10 @@ class Point:
         auto_len: ``max_len`` was chosen by :func:`auto_packet_length`.
         size: payload bytes, or None for :func:`steady_size`.
         seed: seeds the payload and the line's impairments.
+        hints: what both ends are told about the line (:data:`HINTS`):
+            ``exact``, ``none`` or one value 10x off.
+        derived_len: ``max_len`` is the length the endpoints derive from
+            their hints (the user's default), not a configured one.
     """
 
     baud: int
@@ -128,6 +135,8 @@ class Point:
     auto_len: bool = False
     size: int | None = None
     seed: int = 1
+    hints: str = "exact"
+    derived_len: bool = False
 
 
 # -- payloads --------------------------------------------------------------------
@@ -359,6 +368,61 @@ def _sweep_rate_window() -> Iterable[Point]:
         yield _auto(replace(BASE, baud=r, window=31))
 
 
+def derived_point(point: Point) -> Point:
+    """``point`` with the packet length its endpoints derive from their hints
+    (what a user who configures nothing but the hints gets)."""
+    delay, rate = hinted(point.hints, point.delay, point.baud)
+    cfg = EndpointConfig(
+        one_way_delay=delay,
+        line_rate=rate,
+        bits_per_char=BITS_PER_CHAR,
+        window=point.window,
+        encoding=PROFILES[point.profile],
+    )
+    return replace(point, max_len=cfg.derived_max_packet_length(), derived_len=True)
+
+
+RANGE_DELAYS = (0.0, 1.3, 5.0, 20.0, 60.0, 300.0, 1200.0)
+"""One-way delays of the delay-range sweep: a room, the Moon, far relays, Mars."""
+
+_RANGE_ROUND_TRIPS = 20
+"""Round trips of line time a delay-range point moves (at least): at long
+delays the last byte's own delay and the repair of the last losses are a
+round trip or two, so a transfer of a few round trips measures them, not
+the line."""
+
+_RANGE_MAX_BYTES = 12_000_000
+"""Most payload bytes of one delay-range point (CPU: about a minute)."""
+
+
+def _range_size(point: Point) -> int:
+    rtt = 2 * point.delay + 1.0
+    want = int(_RANGE_ROUND_TRIPS * rtt * point.baud / BITS_PER_CHAR / 2)
+    return max(steady_size(point), min(want, _RANGE_MAX_BYTES))
+
+
+def _sweep_delay_range() -> Iterable[Point]:
+    """The issue's delay range at the defaults (window 31, derived packet length)."""
+    for baud in (2400, 9600):
+        for delay in RANGE_DELAYS:
+            for ber, burst in ((0.0, False), (1e-4, False), (1e-4, True)):
+                p = derived_point(replace(BASE, baud=baud, delay=delay, ber=ber, burst=burst))
+                yield replace(p, size=_range_size(p))
+
+
+HINT_DELAYS = (1.3, 20.0, 300.0)
+"""Delays of the hints sweep (2400 bit/s, 1e-4): the Moon, far, very far."""
+
+
+def _sweep_hints() -> Iterable[Point]:
+    """Every hint mode of :data:`HINTS` at the defaults: told the truth,
+    nothing, or one value 10x off."""
+    for delay in HINT_DELAYS:
+        for hints in HINTS:
+            p = derived_point(replace(BASE, delay=delay, hints=hints))
+            yield replace(p, size=_range_size(p))
+
+
 SWEEPS: dict[str, tuple[str, Callable[[], Iterable[Point]]]] = {
     "ofat": ("one factor at a time around the base point", _sweep_ofat),
     "delay-window": ("delay x window at 2400 and 9600 (the delay plot)", _sweep_delay_window),
@@ -369,8 +433,17 @@ SWEEPS: dict[str, tuple[str, Callable[[], Iterable[Point]]]] = {
     "profile-payload": ("both profiles x payload kinds at the base point", _sweep_profile_payload),
     "peers": ("8 KiB files on the real-peer reference line", _sweep_peers),
     "rate-window": ("line rate x window at 1.3 s, 1e-4", _sweep_rate_window),
+    "delay-range": (
+        "delay 0..1200 s at 2400 and 9600, errors 0 / 1e-4 / bursts, defaults",
+        _sweep_delay_range,
+    ),
+    "hints": ("exact, no and wrong hints at 1.3, 20 and 300 s (2400, 1e-4)", _sweep_hints),
 }
 """Named sweeps: name -> (what it answers, generator of its points)."""
+
+DEFAULT_SWEEPS = tuple(s for s in SWEEPS if s not in ("delay-range", "hints"))
+"""The designed grid (``--full``); ``delay-range`` and ``hints`` move tens of
+megabytes a point and run by name (``--sweep delay-range --sweep hints``)."""
 
 
 def _sweep_quick() -> Iterable[Point]:
@@ -449,6 +522,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         encoding=encoding,
         seed=point.seed,
         time_cap=cap,
+        hints=point.hints,
     )
     goodput = m.delivered / m.seconds if m.seconds > 0 else 0.0
     efficiency = goodput / line_bps
@@ -478,7 +552,12 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         # Extras.
         "profile": point.profile,
         "default_window": point.window == default_window(),
-        "length_policy": "auto" if point.auto_len else "fixed",
+        "length_policy": "auto" if point.auto_len else "derived" if point.derived_len else "fixed",
+        "hints": point.hints,
+        "time_to_first_byte_s": None
+        if m.first_byte_seconds is None
+        else round(m.first_byte_seconds, 3),
+        "long_sequence": m.long_sequence,
         "mean_byte_error_rate": mean_byte_error_rate(point.ber, burst),
         "packet_error_rate": round(p_hit, 6),
         "limit_Bps": round(limit, 3),

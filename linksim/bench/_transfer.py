@@ -89,6 +89,10 @@ class Measurement:
         smoothed_rtt: the sender's final smoothed round trip, s (None if never
             sampled).
         effective_window: the sender's final effective window, packets.
+        first_byte_seconds: virtual seconds from the connect call to the
+            first payload byte read at the far end (time to first byte), or
+            None if none arrived.
+        long_sequence: the ends negotiated long sequence numbers.
     """
 
     delivered: int
@@ -103,6 +107,8 @@ class Measurement:
     fast_retransmits: int
     smoothed_rtt: float | None
     effective_window: int
+    first_byte_seconds: float | None = None
+    long_sequence: bool = False
 
 
 def packet_sizes(payload: bytes, encoding: Encoding, max_len: int) -> tuple[float, float]:
@@ -208,7 +214,7 @@ def simulate(
     byte_error_rate: float,
     burst: GilbertElliott | None,
     window: int,
-    max_len: int,
+    max_len: int | None,
     encoding: Encoding,
     seed: int,
     time_cap: float,
@@ -263,6 +269,7 @@ def simulate(
     quantum = 16 * BITS_PER_CHAR / rate
     cap_at = math.inf
     end = "complete"
+    first_byte: float | None = None
     while len(got) < size:
         if start is None and a.state is State.ESTABLISHED:
             start = now
@@ -293,6 +300,8 @@ def simulate(
             if t is not None and t <= now:
                 ep.handle_timer(now)
         got += b.read(None, now)
+        if first_byte is None and got:
+            first_byte = now
         events = [e for ep in (a, b) for e in ep.events()]
         if any(isinstance(e, LinkDead) for e in events):
             end = "link dead"
@@ -315,4 +324,6 @@ def simulate(
         fast_retransmits=s.fast_retransmits,
         smoothed_rtt=s.smoothed_rtt,
         effective_window=s.effective_window,
+        first_byte_seconds=first_byte,
+        long_sequence=s.long_sequence,
     )

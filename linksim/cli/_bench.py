@@ -19,6 +19,7 @@ from typing import Any
 
 from linksim._plotting import PlotUnavailable
 from linksim.bench import (
+    GOODPUT_HINTS,
     GOODPUT_PROFILES,
     KERMIT_PAIRS,
     LATENCY_TRANSPORTS,
@@ -182,6 +183,14 @@ def add_goodput_arguments(ap: argparse.ArgumentParser) -> None:
     custom.add_argument("--payload", choices=["binary", "text", "commands"], action="append")
     custom.add_argument("--profile", choices=sorted(GOODPUT_PROFILES), action="append")
     custom.add_argument("--eight-bit", action="store_true", help="same as --profile 8bit")
+    custom.add_argument(
+        "--hints",
+        choices=GOODPUT_HINTS,
+        action="append",
+        help="what both ends are told about the line: the truth (exact, the default), "
+        "nothing (none), or the delay or the rate 10x too low or too high; with no "
+        "--max-len the packet length is what the ends derive from these hints",
+    )
     ap.add_argument(
         "--size", type=SIZE, help="payload bytes per point (default: sized for steady state)"
     )
@@ -205,22 +214,30 @@ def _print_goodput_table(rows: Sequence[dict[str, Any]]) -> None:
     print(
         "virtual time (exact, machine-independent); goodput and limit in payload bytes/s\n"
         f"{'baud':>5} {'delay':>5} {'errors':>7} {'win':>3} {'len':>5} {'payload':>8} "
-        f"{'profile':>9} {'bytes':>7} {'seconds':>8} {'goodput':>8} {'eff':>6} "
-        f"{'limit':>6} {'ratio':>6} {'rtx':>4} {'tmo':>4}"
+        f"{'profile':>9} {'bytes':>9} {'seconds':>9} {'goodput':>8} {'eff':>6} "
+        f"{'limit':>6} {'ratio':>6} {'rtx':>4} {'tmo':>4} {'hints':>16} {'1st byte':>9}"
     )
     for r in rows:
         errors = "burst" if r["burst"] else f"{r['byte_error_rate']:g}"
-        length = f"{r['max_packet_len']}{'a' if r['length_policy'] == 'auto' else ''}"
+        policy = r["length_policy"]
+        mark = {"auto": "a", "derived": "d"}.get(policy, "")
+        length = f"{r['max_packet_len']}{mark}"
+        first = r.get("time_to_first_byte_s")
+        first_text = "-" if first is None else f"{first:.1f}"
         window = f"{r['window']}{'*' if r['default_window'] else ''}"
         flag = "" if r["complete"] else f"  {r.get('end', 'incomplete').upper()}"
         flag += "" if r["ok"] else "  DATA MISMATCH"
         print(
             f"{r['baud']:>5} {r['one_way_delay_s']:>5g} {errors:>7} {window:>3} {length:>5} "
-            f"{r['payload']:>8} {r['profile']:>9} {r['payload_bytes']:>7} {r['seconds']:>8.1f} "
+            f"{r['payload']:>8} {r['profile']:>9} {r['payload_bytes']:>9} {r['seconds']:>9.1f} "
             f"{r['goodput_Bps']:>8.1f} {r['efficiency']:>6.3f} {r['limit_efficiency']:>6.3f} "
-            f"{r['ratio_to_limit']:>6.3f} {r['retransmissions']:>4} {r['timeouts']:>4}{flag}"
+            f"{r['ratio_to_limit']:>6.3f} {r['retransmissions']:>4} {r['timeouts']:>4} "
+            f"{r.get('hints', 'exact'):>16} {first_text:>9}{flag}"
         )
-    print("* default window; a: automatic packet length; eff = goodput / line bytes/s")
+    print(
+        "* default window; a: automatic packet length; d: derived from the hints; "
+        "eff = goodput / line bytes/s; 1st byte: s from connect to the first byte read"
+    )
 
 
 def goodput_main(args: argparse.Namespace) -> int:
@@ -237,6 +254,7 @@ def goodput_main(args: argparse.Namespace) -> int:
             lengths=args.max_len,
             payloads=args.payload,
             profiles=[*(args.profile or []), *(["8bit"] if args.eight_bit else [])],
+            hints=args.hints,
             size=args.size,
             seed=args.seed,
         )

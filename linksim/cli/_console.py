@@ -30,7 +30,14 @@ from linksim.control import (
     resolve_task,
     script_lines,
 )
-from linksim.demo import ConsoleOptions, DemoOptions, print_report, run_console, run_control
+from linksim.demo import (
+    ConsoleOptions,
+    DemoOptions,
+    print_report,
+    run_console,
+    run_control,
+    run_time_limit,
+)
 from linksim.link import DirectionConfig, LinkConfig, run_virtual
 
 from . import _demo
@@ -101,7 +108,11 @@ def add_console_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
     ap.add_argument("--plain", action="store_true", help="line output even on a terminal")
     ap.add_argument("--json", action="store_true", help="print a final summary as JSON")
-    ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
+    ap.add_argument(
+        "--timeout",
+        type=SECONDS,
+        help="give up after this many s (default: 600, or 40 round trips of a longer line)",
+    )
 
 
 def _task_arguments(ap: argparse.ArgumentParser) -> None:
@@ -228,7 +239,7 @@ def console_main(args: argparse.Namespace) -> int:
             world=world,
             key=key,
             live=False if args.plain else None,
-            timeout=args.timeout,
+            timeout=args.timeout if args.timeout is not None else run_time_limit(link),
         )
         terminal, script = _lines(args) if args.interactive else (None, None)
         rate = args.speedup
@@ -329,7 +340,7 @@ def control_main(args: argparse.Namespace) -> int:
             key=key,
             progress=not args.quiet,
             live=False if args.plain else None,
-            timeout=args.timeout,
+            timeout=args.timeout if args.timeout is not None else run_time_limit(link),
         )
     except (ConfigError, ValueError, OSError, serialsocket.LocalProtocolError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)

@@ -16,7 +16,14 @@ import trio
 import serialsocket
 from linksim._errors import ConfigError
 from linksim.arm import WorldConfig
-from linksim.demo import DemoOptions, DemoReport, print_report, run_control, run_demo
+from linksim.demo import (
+    DemoOptions,
+    DemoReport,
+    print_report,
+    run_control,
+    run_demo,
+    run_time_limit,
+)
 from linksim.link import DirectionConfig, LinkConfig, endpoint_config_for, endpoint_overrides
 
 from ._args import (
@@ -47,7 +54,11 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--json", action="store_true", help="print the final report as JSON only")
     ap.add_argument("--plain", action="store_true", help="status lines, not a live table")
     ap.add_argument("--quiet", action="store_true", help="no progress display")
-    ap.add_argument("--timeout", type=SECONDS, default=600.0, help="give up after this many s")
+    ap.add_argument(
+        "--timeout",
+        type=SECONDS,
+        help="give up after this many s (default: 600, or 40 round trips of a longer line)",
+    )
 
 
 def add_demo_arguments(ap: argparse.ArgumentParser) -> None:
@@ -109,7 +120,7 @@ def demo_main(args: argparse.Namespace) -> int:
             world=_world(args),
             progress=not args.quiet,
             live=False if args.plain else None,
-            timeout=args.timeout,
+            timeout=args.timeout if args.timeout is not None else run_time_limit(link),
         )
         if args.window is not None or args.max_len is not None:
             endpoint_config_for(
@@ -159,7 +170,7 @@ def control_main(args: argparse.Namespace) -> int:
             key=key,
             progress=not args.quiet,
             live=False if args.plain else None,
-            timeout=args.timeout,
+            timeout=args.timeout if args.timeout is not None else run_time_limit(link),
         )
     except (ConfigError, ValueError, OSError) as exc:
         print(f"linksim control: {exc}", file=sys.stderr)

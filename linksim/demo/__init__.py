@@ -16,7 +16,7 @@ from ._armserver import serve_arm_serial, serve_arm_tcp
 from ._console_run import ConsoleOptions, ConsoleResult, run_console
 from ._control import run_control
 from ._demo import run_demo
-from ._report import DemoOptions, DemoReport, print_report
+from ._report import DemoOptions, DemoReport, print_report, run_time_limit
 
 __all__ = [
     "ConsoleOptions",
@@ -27,6 +27,7 @@ __all__ = [
     "run_console",
     "run_control",
     "run_demo",
+    "run_time_limit",
     "serve_arm_serial",
     "serve_arm_tcp",
 ]

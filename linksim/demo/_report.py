@@ -53,7 +53,20 @@ class DemoOptions:
     live: bool | None = None
     """Redrawn table (True), plain lines (False), or whatever stderr is (None)."""
     timeout: float = 600.0
-    """Bound on the whole run, seconds of the run's clock."""
+    """Bound on the whole run, seconds of the run's clock (the command line
+    derives it from the line: :func:`run_time_limit`)."""
+
+
+RUN_ROUND_TRIPS = 40
+"""Round trips of the line a whole run is given (connect, authenticate, the
+commands and their replies, close: a dozen; the rest is margin)."""
+
+
+def run_time_limit(link: LinkConfig) -> float:
+    """The default bound on a run over ``link``: 600 s, or :data:`RUN_ROUND_TRIPS`
+    round trips where that is longer (Mars: 40 minutes a round trip)."""
+    delay = max(link.a_to_b.delay + link.a_to_b.jitter, link.b_to_a.delay + link.b_to_a.jitter)
+    return max(600.0, RUN_ROUND_TRIPS * 2 * delay)
 
 
 @dataclass(slots=True)

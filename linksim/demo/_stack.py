@@ -22,6 +22,7 @@ from linksim.link import (
     LinkConfig,
     endpoint_config_for,
     endpoint_overrides,
+    handshake_timeout_for,
     open_impaired_link,
     rtt_hint_for,
     serial_socket_pair,
@@ -129,6 +130,7 @@ async def run_virtual_demo(options: DemoOptions) -> DemoReport:
                     key=options.key,
                     incarnation=rng.getrandbits(64),
                     nonce_source=rng.randbytes,
+                    handshake_timeout=handshake_timeout_for(options.link),
                 ) as client:
                     await drive(client, run, options, probe, run_title(options, "virtual time"))
                     figures = client_link_figures(client) | probe()  # the line's own figures win

@@ -39,7 +39,13 @@ from ._modem import (
 from ._pair import serial_socket_pair
 from ._proxy import Cut, ProxyStatistics, TcpDirection, run_proxy
 from ._relay import RelayStatistics, run_relay
-from ._tuning import endpoint_config_for, endpoint_overrides, rtt_hint_for, server_config_for
+from ._tuning import (
+    endpoint_config_for,
+    endpoint_overrides,
+    handshake_timeout_for,
+    rtt_hint_for,
+    server_config_for,
+)
 from ._virtual import run_virtual
 
 __all__ = [
@@ -68,6 +74,7 @@ __all__ = [
     "TcpDirection",
     "endpoint_config_for",
     "endpoint_overrides",
+    "handshake_timeout_for",
     "open_impaired_link",
     "rtt_hint_for",
     "run_proxy",

@@ -280,6 +280,10 @@ _PRESET_DIRECTIONS: dict[str, DirectionConfig] = {
         burst=GilbertElliott(p_good_to_bad=5e-5, p_bad_to_good=0.05, error_bad=0.3),
     ),
     "geo": DirectionConfig(delay=0.27),
+    # Mars near conjunction: 20 light-minutes each way, a 2400 bit/s link,
+    # byte errors (issue 20).  A round trip is 40 minutes; only long sequence
+    # numbers keep such a line busy (serialsocket/PROTOCOL.md section 9).
+    "mars": DirectionConfig(rate=2400, delay=1200.0, byte_error_rate=1e-4),
 }
 PRESETS: tuple[str, ...] = tuple(_PRESET_DIRECTIONS)
 

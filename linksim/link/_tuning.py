@@ -23,7 +23,13 @@ from tcpstream.commands import PACKET_SIZE
 
 from ._config import LinkConfig
 
-__all__ = ["endpoint_config_for", "endpoint_overrides", "rtt_hint_for", "server_config_for"]
+__all__ = [
+    "endpoint_config_for",
+    "endpoint_overrides",
+    "handshake_timeout_for",
+    "rtt_hint_for",
+    "server_config_for",
+]
 
 
 def endpoint_config_for(link: LinkConfig, **overrides: Any) -> EndpointConfig:
@@ -69,6 +75,13 @@ def rtt_hint_for(link: LinkConfig) -> float:
         if d.rate is not None:
             total += (PACKET_SIZE * 1.6 + 40) * d.bits_per_char / d.rate
     return max(0.05, total)
+
+
+def handshake_timeout_for(link: LinkConfig) -> float:
+    """How long a controller waits for the arm's GRANT on ``link``: 30 s, or six
+    round trips where that is longer (HELLO, CHALLENGE, AUTH, GRANT are two,
+    a retransmission or two of them on a noisy line the rest; Mars: 4 hours)."""
+    return max(30.0, 6 * rtt_hint_for(link))
 
 
 def server_config_for(

@@ -18,8 +18,17 @@ import pytest
 
 from linksim import DirectionConfig
 from linksim.bench import SWEEPS, Point, auto_packet_length, run_point
-from linksim.bench._grid import BASE, QUICK, ROW_KEYS, build_grid, command_records, default_window
-from linksim.bench._transfer import BENCH_BURST, packet_error_probability
+from linksim.bench._grid import (
+    BASE,
+    DEFAULT_SWEEPS,
+    QUICK,
+    RANGE_DELAYS,
+    ROW_KEYS,
+    build_grid,
+    command_records,
+    default_window,
+)
+from linksim.bench._transfer import BENCH_BURST, HINTS, packet_error_probability
 from linksim.link import GilbertElliott, LinkDirection
 
 TINY = [
@@ -117,7 +126,7 @@ def test_plot_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch
 
 
 def test_grid_design_covers_the_issue() -> None:
-    full = build_grid(list(SWEEPS))
+    full = build_grid(list(DEFAULT_SWEEPS))
     points = [p for p, _ in full]
     assert len(points) == len(set(points))
     assert BASE in points
@@ -141,6 +150,34 @@ def test_grid_design_covers_the_issue() -> None:
     assert all(p.window == 1 and p.max_len == 128 for p in paper)
     # The quick grid holds the issue's base row.
     assert BASE in [p for p, _ in build_grid([("quick", QUICK[1])])]
+
+
+def test_delay_range_and_hints_sweeps_cover_issue_20() -> None:
+    """The delay-range and hints sweeps (issue 20) run by name, outside --full."""
+    assert {"delay-range", "hints"} <= set(SWEEPS)
+    assert "delay-range" not in DEFAULT_SWEEPS
+    ranged = [p for p, _ in build_grid(["delay-range"])]
+    assert {p.delay for p in ranged} == set(RANGE_DELAYS) >= {0.0, 1.3, 5.0, 20.0, 60.0, 1200.0}
+    assert {p.baud for p in ranged} == {2400, 9600}
+    assert {(p.ber, p.burst) for p in ranged} == {(0.0, False), (1e-4, False), (1e-4, True)}
+    assert all(p.derived_len and p.window == default_window() for p in ranged)
+    hinted = [p for p, _ in build_grid(["hints"])]
+    assert {p.hints for p in hinted} == set(HINTS)
+
+
+def test_a_point_without_hints_reports_its_hints_and_time_to_first_byte() -> None:
+    from linksim.bench import custom_grid
+
+    grid = custom_grid(delays=[0.27], hints=["none", "exact"], size=3000)
+    assert grid is not None
+    rows = [run_point(p) for p, _ in grid]
+    assert [r["hints"] for r in rows] == ["none", "exact"]
+    for r in rows:
+        assert r["ok"]
+        assert r["complete"]
+        assert r["length_policy"] == "derived"
+        # The first byte needs the handshake's round trip and one more delay.
+        assert r["time_to_first_byte_s"] >= 3 * 0.27
 
 
 def test_limit_formula_pieces() -> None:

@@ -14,7 +14,7 @@ from linksim.link import FaultAction, GilbertElliott, ScriptedFault
 
 
 def test_presets_are_exactly_the_issues_list() -> None:
-    assert PRESETS == ("clean", "phone-2400", "moon", "noisy-moon", "geo")
+    assert PRESETS == ("clean", "phone-2400", "moon", "noisy-moon", "geo", "mars")
     assert LinkConfig.preset("clean") == LinkConfig()
     phone = LinkConfig.preset("phone-2400").a_to_b
     assert (phone.rate, phone.byte_error_rate, phone.delay) == (2400, 1e-5, 0.05)
@@ -24,8 +24,10 @@ def test_presets_are_exactly_the_issues_list() -> None:
     assert (noisy.delay, noisy.rate, noisy.byte_error_rate) == (1.3, 2400, 1e-4)
     assert noisy.burst == GilbertElliott(5e-5, 0.05, error_bad=0.3)
     assert LinkConfig.preset("geo").a_to_b == DirectionConfig(delay=0.27)
+    mars = LinkConfig.preset("mars").a_to_b
+    assert (mars.delay, mars.rate, mars.byte_error_rate) == (1200.0, 2400, 1e-4)
     with pytest.raises(ConfigError, match="preset must be one of clean, phone-2400"):
-        LinkConfig.preset("mars")
+        LinkConfig.preset("jupiter")
 
 
 def test_configs_are_frozen_and_slotted() -> None:

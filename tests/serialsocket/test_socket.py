@@ -33,6 +33,7 @@ LINKS = {
     "clean": LinkConfig.preset("clean"),
     "geo": LinkConfig.preset("geo"),
     "moon": LinkConfig.preset("moon"),
+    "mars": LinkConfig.preset("mars"),
     # Lossy and fast: byte errors, lost bytes and noise bytes on a 0.1 s line
     # without a rate limit, so trio's 1 MiB duplex check takes seconds.  (The
     # rate-limited lossy presets, phone-2400 and noisy-moon, pass as well, at
@@ -44,7 +45,15 @@ LINKS = {
 # The rate-limited Earth-Moon line: trio's duplex check moves 1 MiB each way
 # at 9600 bit/s, about an hour of link time.  check_half_closeable_stream
 # runs check_two_way_stream first, so moon and lossy run once, there.
-HALF_CLOSEABLE = ["clean", "geo", "lossy", pytest.param("moon", marks=pytest.mark.slow)]
+HALF_CLOSEABLE = [
+    "clean",
+    "geo",
+    "lossy",
+    pytest.param("moon", marks=pytest.mark.slow),
+    # Mars (2400 bit/s, 20 minutes each way): passes, in about three minutes
+    # of CPU -- outside the default run; `make test-long` runs it.
+    pytest.param("mars", marks=pytest.mark.long),
+]
 
 
 def maker_for(
