@@ -81,7 +81,11 @@ def _world(args: argparse.Namespace) -> WorldConfig:
 def _finish(report: DemoReport, args: argparse.Namespace, prog: str) -> int:
     print_report(report, as_json=args.json)
     if not report.ok:
-        print(f"{prog}: {report.error or 'the run failed'}", file=sys.stderr)
+        # The human report on a terminal has just shown the error: saying it
+        # again on stderr printed it twice (issue 19).  Piped or as JSON, the
+        # report is for a program or a file, and stderr says what happened.
+        if args.json or not sys.stdout.isatty():
+            print(f"{prog}: {report.error or 'the run failed'}", file=sys.stderr)
         return 1
     return 0
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 import pytest
 
@@ -36,3 +37,21 @@ def test_help_names_the_preset_the_command_runs(
     with pytest.raises(SystemExit):
         main([command, "--help"])
     assert "named preset (default: noisy-moon)" in " ".join(capsys.readouterr().out.split())
+
+
+@pytest.mark.parametrize("stdout_is_a_terminal", [True, False])
+def test_a_failed_run_says_why_once_where_the_user_looks(
+    stdout_is_a_terminal: bool,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """On a terminal the report shows the error and stderr does not repeat it
+    (it was printed twice); with stdout piped, the report goes to the pipe
+    and stderr says what happened."""
+    monkeypatch.setattr(sys.stdout, "isatty", lambda: stdout_is_a_terminal)
+    assert main(["demo", "--virtual", "--outage", "12:1000000"]) == 1
+    captured = capsys.readouterr()
+    said = (captured.out + captured.err).count("the link failed with command #1")
+    assert said == (1 if stdout_is_a_terminal else 2)
+    assert "the link failed" in captured.out
+    assert ("the link failed" in captured.err) is not stdout_is_a_terminal

@@ -93,10 +93,12 @@ def test_a_console_log_plots(tmp_path: pathlib.Path, capsys: pytest.CaptureFixtu
         assert (
             max(abs(a - b) for a, b in zip(r["predicted_joints_deg"], reported, strict=True)) < 0.5
         )
+    capsys.readouterr()
     png = tmp_path / "run.png"
     assert main(["plot", str(log), "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    capsys.readouterr()
+    # The result -- where the plot went -- is stdout's, nothing else is (issue 19).
+    assert capsys.readouterr().out.strip() == str(png)
 
 
 def test_plotting_an_empty_log_says_why(
