@@ -10,6 +10,7 @@ fixed sleep.
 from __future__ import annotations
 
 import json
+import os
 import pathlib
 import random
 import signal
@@ -300,3 +301,48 @@ def test_both_directions_over_an_impaired_line_exit_0_only_with_every_byte(
     # And on this line it is delivered.
     assert client.returncode == 0, client.stderr[-1500:]
     assert server.returncode == 0, server_err[-1500:]
+
+
+def test_progress_is_one_rewritten_line_when_stderr_is_a_terminal(
+    relay: tuple[str, str], tmp_path: pathlib.Path
+) -> None:
+    """At a terminal the netcat keeps one progress line on stderr (rewritten in
+    place, erased at the end); piped, it prints none (the other tests)."""
+    a, b = relay
+    (tmp_path / "up").write_bytes(random.Random(7).randbytes(20_000))
+    server = subprocess.Popen(
+        cli("listen", b, "--delay", "0.002", "--dead-after", "60"),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    master, slave = os.openpty()
+    try:
+        wait_until_reading(server, b)
+        with (tmp_path / "up").open("rb") as up_in:
+            client = subprocess.run(
+                cli("connect", a, "--delay", "0.002", "--connect-timeout", "30"),
+                stdin=up_in,
+                stdout=subprocess.DEVNULL,
+                stderr=slave,
+                timeout=GUARD,
+            )
+        os.close(slave)
+        shown = b""
+        while True:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:  # EIO: the terminal's last writer has gone
+                break
+            if not chunk:
+                break
+            shown += chunk
+        got, _ = server.communicate(timeout=GUARD)
+    finally:
+        _reap(server)
+        os.close(master)
+    assert client.returncode == 0
+    assert got == (tmp_path / "up").read_bytes()
+    assert b"\r\x1b[K" in shown  # the line is rewritten in place ...
+    assert shown.endswith(b"\r\x1b[K")  # ... and erased at the end
+    assert b"connecting..." in shown or b"acknowledged" in shown, shown
