@@ -84,8 +84,13 @@ class TelemetryLog:
         self._write(record)
 
     def record(self, now: float, kind: str, data: dict[str, Any]) -> None:
-        """Any other record (``divergence``, ``preview``)."""
-        self._write({"type": kind, "t": self._t(now)} | data)
+        """Any other record (``divergence``, ``preview``).
+
+        Its ``t`` is the log's, from ``origin``, whatever ``data`` holds: a
+        divergence carries the clock reading it was taken at, and letting it
+        win put the model's end poses of a real-time run hours off the plot's
+        time axis (a virtual clock starts near 0, which hid it)."""
+        self._write({**data, "type": kind, "t": self._t(now)})
 
     def _t(self, now: float) -> float:
         return round(now - self._origin, 4)

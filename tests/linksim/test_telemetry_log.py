@@ -112,3 +112,15 @@ def test_plotting_an_empty_log_says_why(
     with pytest.raises(PlotUnavailable, match="no reported arm state"):
         plot_log(path, tmp_path / "x.png")
     assert json.loads(path.read_text())["type"] == "header"
+
+
+def test_a_record_carries_the_log_s_time_not_its_own(tmp_path: pathlib.Path) -> None:
+    """A divergence holds the clock reading it was taken at; in the log (and on
+    the plot) it must sit at the log's time from its origin.  On a real clock
+    the two differ by hours, and the model's end poses fell off the plot."""
+    path = tmp_path / "run.jsonl"
+    with TelemetryLog(path, origin=123_000.0) as log:
+        log.record(123_005.5, "divergence", {"t": 123_005.5, "predicted_joints_deg": [0.0] * 6})
+    (divergence,) = read_log(path).other
+    assert divergence["t"] == 5.5
+    assert divergence["type"] == "divergence"
