@@ -614,7 +614,7 @@ class Endpoint:
                     send=False,
                 )
             else:
-                self._answers += 1  # a second answer: the seed would be ambiguous
+                self._answers += 1  # a second answer: the seed is only an upper bound
                 self._answer_init()  # Our answer was lost; say it again.
             return
         if not allowed(st, Trigger.INIT_RECEIVED):
@@ -748,13 +748,20 @@ class Endpoint:
                 self._error_sent_at = now
                 self._queue_error(self._abort_reason)
             return
-        if self._answers == 1 and self._state is State.ESTABLISHED and ptype != PacketType.INIT:
-            # The first packet the connector sent after our one answer: the
-            # round trip is at most this (the connector may have waited).
-            self._answers = 2
-            if self._rtt.srtt is None:
-                self._rtt.seed(now - self._answer_sent_at)
-                self._measured()
+        if (
+            self._answers >= 1
+            and self._rtt.srtt is None
+            and self._state is State.ESTABLISHED
+            and ptype != PacketType.INIT
+        ):
+            # The first packet the connector sent after our first answer: the
+            # round trip is at most this (the connector may have waited, or
+            # been answered by a later copy of our answer).  Seeding only
+            # after a single answer left a listener whose connector had
+            # resent its init (no hints, a long line) unmeasured, and its
+            # 60 s unmeasured dead_after ended a healthy link at 60 s one way.
+            self._rtt.seed(now - self._answer_sent_at)
+            self._measured()
         if ptype == PacketType.INIT:
             self._on_init(packet, now)
         elif ptype == PacketType.ERROR:

@@ -115,3 +115,26 @@ def test_liveness_waits_for_a_measurement_then_follows_it() -> None:
     b.receive_data(a.data_to_send(2.6), 3.9)
     # b seeded its estimate from its answer to a's first packet: 2.6 s.
     assert b.statistics().smoothed_rtt == pytest.approx(2.6)
+
+
+def test_no_hints_at_a_minute_one_way_is_not_judged_dead() -> None:
+    """At 60 s one way the connector resends its init before the first answer
+    can arrive, so the listener answers several copies.  It used to seed its
+    round trip only after a single answer: unmeasured, its 60 s dead_after
+    ended the link ("link dead", 14 B/s).  Now it starts from the upper
+    bound its first answer gives, and the link stays up to the end."""
+    m = simulate(
+        random.Random(60).randbytes(200_000),
+        rate=2400,
+        delay=60.0,
+        byte_error_rate=1e-4,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=1,
+        time_cap=100_000,
+        hints="none",
+    )
+    assert m.end == "complete"
+    assert m.ok
