@@ -118,6 +118,8 @@ class _Connection(abc.ABC):
         self._send_dir = _auth.TO_SERVER if self.side is Side.CLIENT else _auth.TO_CLIENT
         self._recv_dir = _auth.TO_CLIENT if self.side is Side.CLIENT else _auth.TO_SERVER
         self._inbuf = bytearray()
+        self._hunting = False
+        """Skipping to the next magic after a packet that did not verify."""
         self._out: list[bytes] = []
         self._out_bytes = 0
         # Bounded by construction: every received packet yields at most two events
@@ -184,6 +186,13 @@ class _Connection(abc.ABC):
             return
         self._inbuf += data
         while len(self._inbuf) >= PACKET_SIZE and not self.closed:
+            if self._hunting:
+                # Looking for the magic after bytes that did not verify: what
+                # precedes it is the forgery's tail, nobody's packet to blame.
+                if not self._inbuf.startswith(MAGIC):
+                    self._skip_to_magic()
+                    continue
+                self._hunting = False
             raw = bytes(self._inbuf[:PACKET_SIZE])
             try:
                 packet = decode_packet(raw)
@@ -336,6 +345,10 @@ class _Connection(abc.ABC):
         """
         if self._state is SessionState.OPEN:
             self._skip_to_magic()
+            # The byte kept when the buffer ends in b"T" may start the next
+            # magic, or be the forgery's last byte: until a magic is in front,
+            # skip without blame (a b"TT" bad magic was counted and answered).
+            self._hunting = True
         else:
             del self._inbuf[:PACKET_SIZE]
 
