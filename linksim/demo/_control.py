@@ -18,7 +18,12 @@ import trio
 import serialsocket
 from linksim.arm import SimulatedArm
 from linksim.control import TaskRun
-from linksim.link import endpoint_config_for, endpoint_overrides, rtt_hint_for
+from linksim.link import (
+    endpoint_config_for,
+    endpoint_overrides,
+    handshake_timeout_for,
+    rtt_hint_for,
+)
 from tcpstream import (
     Command,
     Server,
@@ -160,6 +165,7 @@ async def _run_virtual(
                     key=options.key,
                     incarnation=rng.getrandbits(64),
                     nonce_source=rng.randbytes,
+                    handshake_timeout=handshake_timeout_for(options.link),
                 ) as client:
                     await drive(client, run, options, probe, title)
                     figures = client_link_figures(client) | probe()

@@ -65,6 +65,31 @@ async def wired(executor: Any, config: ServerConfig | None = None) -> AsyncItera
         nursery.cancel_scope.cancel()
 
 
+class DeafStream(trio.abc.Stream):
+    """A client-side stream that stops hearing the arm once ``deaf`` is set:
+    what the controller sends still arrives, every reply is lost (with the
+    link, in a cut)."""
+
+    def __init__(self, inner: trio.abc.Stream) -> None:
+        self.inner = inner
+        self.deaf = False
+
+    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
+        await self.inner.send_all(data)
+
+    async def wait_send_all_might_not_block(self) -> None:
+        await self.inner.wait_send_all_might_not_block()
+
+    async def receive_some(self, max_bytes: int | None = None) -> bytes:
+        while True:
+            data = bytes(await self.inner.receive_some(max_bytes))
+            if not self.deaf or not data:
+                return data
+
+    async def aclose(self) -> None:
+        await self.inner.aclose()
+
+
 class SlowStream(trio.abc.Stream):
     """A client-side stream whose sends and close take some (virtual) time, as
     TCP's and a serial socket's do: a session can be over before the pump has

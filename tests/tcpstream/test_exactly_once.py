@@ -23,30 +23,7 @@ from tcpstream import (
 )
 
 from .fakearm import FakeArm
-from .harness import SlowStream, run
-
-
-class _DeafWhen:
-    """A client-side stream that can stop hearing the arm (replies lost in the cut)."""
-
-    def __init__(self, stream: trio.abc.Stream) -> None:
-        self.inner = stream
-        self.deaf = False
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes:
-        while True:
-            data = await self.inner.receive_some(max_bytes)
-            if not self.deaf or not data:
-                return data
-
-    async def aclose(self) -> None:
-        await self.inner.aclose()
+from .harness import DeafStream, SlowStream, run
 
 
 def test_a_forgotten_identity_never_gets_its_command_run_twice() -> None:
@@ -58,12 +35,12 @@ def test_a_forgotten_identity_never_gets_its_command_run_twice() -> None:
 
     async def main() -> None:
         async with Server(arm, config) as server, trio.open_nursery() as nursery:
-            streams: list[_DeafWhen] = []
+            streams: list[DeafStream] = []
 
             async def factory() -> trio.abc.Stream:
                 client_end, server_end = trio.testing.memory_stream_pair()
                 nursery.start_soon(server.serve_stream, server_end)
-                wrapped = _DeafWhen(client_end)
+                wrapped = DeafStream(client_end)
                 streams.append(wrapped)
                 return wrapped  # type: ignore[return-value]
 

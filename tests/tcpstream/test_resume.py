@@ -29,7 +29,7 @@ from tcpstream.commands import PACKET_SIZE, Packet, PacketKind, decode_packet, e
 from tcpstream.connection import ClientConnection, ControllerIdentity, SessionState
 
 from .fakearm import FakeArm
-from .harness import Wiring, run, wired
+from .harness import DeafStream, Wiring, run, wired
 
 PATIENT = ServerConfig(dead_time=30.0)
 """A deadman long enough that reconnect tests are about memory, not halting."""
@@ -363,29 +363,6 @@ def test_reconnecting_to_an_arm_that_never_answers_gives_up() -> None:
     run(main)
 
 
-class DeafStream(trio.abc.Stream):
-    """Passes writes through; once ``deaf`` is set, hears nothing more (replies lost)."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-        self.deaf = False
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes | bytearray:
-        data = await self.inner.receive_some(max_bytes)
-        while self.deaf and data:
-            data = await self.inner.receive_some(max_bytes)
-        return data
-
-    async def aclose(self) -> None:
-        await self.inner.aclose()
-
-
 def test_a_restarted_arm_is_detected_even_before_any_reply() -> None:
     """Sent, taken in by the arm, reply lost, arm restarted: unknown, never re-run."""
     first_arm, second_arm = FakeArm(move_time=10.0), FakeArm(move_time=10.0)
@@ -499,30 +476,6 @@ def test_after_a_deadman_the_resumed_controller_learns_why_its_command_stopped()
     assert arm.halts[0] is FailureReason.DEADMAN
 
 
-class _DeafStream(trio.abc.Stream):
-    """A client stream that stops hearing the arm once ``deaf`` is set: what
-    the controller sends still arrives, every reply is lost with the link."""
-
-    def __init__(self, inner: trio.abc.Stream) -> None:
-        self.inner = inner
-        self.deaf = False
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self.inner.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self.inner.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes:
-        while True:
-            data = await self.inner.receive_some(max_bytes)
-            if not self.deaf or not data:
-                return data
-
-    async def aclose(self) -> None:
-        await self.inner.aclose()
-
-
 def test_a_command_whose_accepted_was_lost_is_accepted_when_it_completes() -> None:
     """The ACCEPTED and COMPLETED of a command are both lost with the link;
     after the resume the arm answers COMPLETED from memory, with no ACCEPTED.
@@ -530,13 +483,13 @@ def test_a_command_whose_accepted_was_lost_is_accepted_when_it_completes() -> No
     assertion: seen in the README tour as a traceback from ``linksim control``
     through ``linksim proxy --cut``."""
     arm = FakeArm(move_time=1.0)
-    streams: list[_DeafStream] = []
+    streams: list[DeafStream] = []
 
     async def main() -> None:
         async with wired(arm, PATIENT) as w:
 
             async def factory() -> trio.abc.Stream:
-                stream = _DeafStream(await w.factory())
+                stream = DeafStream(await w.factory())
                 streams.append(stream)
                 return stream
 
