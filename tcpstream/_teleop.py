@@ -9,6 +9,7 @@ transport's figures change without telling us).
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import logging
 import math
@@ -56,7 +57,7 @@ class TeleopRefused(Exception):
         self.reason = reason
 
 
-class _Pump:
+class _Pump(abc.ABC):
     def __init__(
         self,
         stream: trio.abc.Stream,
@@ -73,14 +74,17 @@ class _Pump:
     def wake(self) -> None:
         self._wake.set()
 
+    @abc.abstractmethod
     def _events(self, events: list[TeleopEvent]) -> None:
-        raise NotImplementedError
+        """Handle what the channel reported."""
 
+    @abc.abstractmethod
     def _channel(self) -> OperatorChannel | ArmChannel:
-        raise NotImplementedError
+        """The sans-I/O end this pump drives."""
 
+    @abc.abstractmethod
     def _holding(self) -> bool:
-        raise NotImplementedError
+        """Whether output is being held back (the line is busy)."""
 
     async def _reader(self) -> None:
         ch = self._channel()

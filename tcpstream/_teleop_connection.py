@@ -20,6 +20,7 @@ first measurement).  A STOP bypasses both.
 
 from __future__ import annotations
 
+import abc
 import hmac
 import struct
 from collections import deque
@@ -80,7 +81,7 @@ _RTT_HISTORY = 64
 """Samples remembered for matching replies to send times: at least the window."""
 
 
-class _End:
+class _End(abc.ABC):
     """What both ends share: the reader, the tags, the counters, the statistics."""
 
     _tx_dir: bytes
@@ -187,8 +188,9 @@ class _End:
         self._bad_in_row = 0
         return events
 
+    @abc.abstractmethod
     def _dispatch(self, kind: TeleopKind, raw: bytes, now: float) -> list[TeleopEvent]:
-        raise NotImplementedError
+        """Decode and apply one authenticated packet of this end's kinds."""
 
     def _tag_failed(self) -> list[TeleopEvent]:
         if self._state is ChannelState.OPEN:
