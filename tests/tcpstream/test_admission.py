@@ -5,6 +5,9 @@ out with SERVER_FULL on 4 of 4 tries.  Now a new connection takes the slot of
 the least advanced handshake when the server is full, and one slot is always
 the controller's.  The first test runs on real loopback TCP, the rest on
 virtual time; outcomes are asserted, never a duration.
+
+The issue's measurement is the first test's figure, printed under ``-s``:
+``pytest tests/tcpstream/test_admission.py -s -k unauthenticated_sockets``.
 """
 
 from __future__ import annotations
@@ -14,7 +17,15 @@ import random
 import pytest
 import trio
 
-from tcpstream import CommandCode, Refused, RefuseReason, Server, ServerConfig, connect_tcp
+from tcpstream import (
+    ArmClient,
+    CommandCode,
+    Refused,
+    RefuseReason,
+    Server,
+    ServerConfig,
+    connect_tcp,
+)
 from tcpstream.commands import PACKET_SIZE
 from tcpstream.connection import ClientConnection, ControllerIdentity, Role
 
@@ -29,13 +40,17 @@ RECONNECTS = 20
 
 
 def test_a_flood_of_unauthenticated_sockets_never_keeps_the_controller_out() -> None:
+    """Under the flood a keyed controller opens a new session 20 times, then
+    one session's link blips 20 times and the controller resumes it each time
+    with a single reconnect attempt (a refusal would end the session)."""
     arm = FakeArm(move_time=0.0)
     config = ServerConfig(key=KEY, max_connections=8, rtt_hint=0.05)
     got_in = 0
+    resumed = 0
     opened = 0
 
     async def main() -> None:
-        nonlocal got_in, opened
+        nonlocal got_in, resumed, opened
         with trio.fail_after(GUARD):
             async with Server(arm, config) as server, trio.open_nursery() as nursery:
                 listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
@@ -72,19 +87,37 @@ def test_a_flood_of_unauthenticated_sockets_never_keeps_the_controller_out() -> 
                             await client.move_joint(1, 0.01)
                             got_in += 1
                         assert attempt + 1 == got_in
+                    # One session whose link blips: every cut frees the
+                    # controller's slot for the flood, and the resume must
+                    # still get in at its first attempt.
+                    links: list[trio.SocketStream] = []
+
+                    async def link() -> trio.abc.Stream:
+                        links.append(await trio.open_tcp_stream("127.0.0.1", port))
+                        return links[-1]
+
+                    async with ArmClient(
+                        link, key=KEY, identity="blips", reconnect_attempts=1, reconnect_delay=0.05
+                    ) as client:
+                        await client.move_joint(1, 0.01)
+                        for _ in range(RECONNECTS):
+                            await trio.aclose_forcefully(links[-1])
+                            await client.move_joint(1, 0.01)  # waits for the resume
+                            resumed = client.statistics().reconnects
                     stats = server.statistics()
                     flood.cancel_scope.cancel()
                 nursery.cancel_scope.cancel()
         assert stats.handshakes_evicted > 0
         print(
-            f"\n{got_in}/{RECONNECTS} keyed sessions got in under a flood of {FLOODERS} "
-            f"sockets ({opened} opened, {stats.handshakes_evicted} evicted, "
-            f"{stats.refused} refused)"
+            f"\n{got_in}/{RECONNECTS} keyed sessions got in and {resumed}/{RECONNECTS} "
+            f"resumes after a blip got in under a flood of {FLOODERS} sockets "
+            f"({opened} opened, {stats.handshakes_evicted} evicted, {stats.refused} refused)"
         )
 
     trio.run(main)
     assert got_in == RECONNECTS
-    assert arm.count(CommandCode.MOVE_JOINT) == RECONNECTS
+    assert resumed == RECONNECTS
+    assert arm.count(CommandCode.MOVE_JOINT) == 2 * RECONNECTS + 1
 
 
 # --- virtual time ---------------------------------------------------------------
