@@ -23,7 +23,7 @@ from tcpstream import (
 )
 
 from .fakearm import FakeArm
-from .harness import DeafStream, SlowStream, run
+from .harness import DeafStream, SlowStream, run, wired
 
 
 def test_a_forgotten_identity_never_gets_its_command_run_twice() -> None:
@@ -179,3 +179,41 @@ def test_a_client_that_cannot_resume_says_why_for_each_command() -> None:
         assert "2 reconnect attempts failed (last: no carrier)" in text
 
     run(main)
+
+
+def test_leaving_during_a_reconnect_never_waits_for_a_command_that_was_not_sent() -> None:
+    """Finding 3's last point: a submit waiting for the resumed session when the
+    caller leaves ``async with`` ends SessionClosed at once (nothing was sent,
+    so nothing can have run), and the exit does not wait out the reconnect."""
+    arm = FakeArm(move_time=0.1)
+    outcome: list[str] = []
+
+    async def main() -> None:
+        async with wired(arm) as w, trio.open_nursery() as nursery:
+            client = w.client(identity="leaver", reconnect_attempts=3, reconnect_delay=100.0)
+
+            async def late_submit() -> None:
+                try:
+                    await client.submit(commands.move_joint(1, 0.1))
+                    outcome.append("sent")
+                except OutcomeUnknown:
+                    outcome.append("unknown")
+                except SessionClosed as exc:
+                    outcome.append(f"closed: {exc}")
+
+            async with client:
+                await client.move_joint(2, 0.1)
+                await w.break_link()
+                await trio.sleep(1.0)  # the client waits 100 s before reconnecting
+                nursery.start_soon(late_submit)
+                await trio.sleep(1.0)
+                assert outcome == []  # waiting for the session, as documented
+                left = trio.current_time()
+            assert trio.current_time() - left < 5.0, "the exit waited out the reconnect"
+            await trio.sleep(0)
+            assert client.statistics().pending == 0
+
+    run(main)
+    assert len(outcome) == 1
+    assert outcome[0].startswith("closed: the session is closed; nothing was sent"), outcome
+    assert [int(c.args[0]) for c in arm.executed if c.code is CommandCode.MOVE_JOINT] == [2]
