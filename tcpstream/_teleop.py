@@ -149,7 +149,7 @@ class TeleopOperator(_Pump):
         return self.channel
 
     def _holding(self) -> bool:
-        return self.channel.pending is not None
+        return self.channel.pending is not None or self.channel.repeating_stop
 
     def _events(self, events: list[TeleopEvent]) -> None:
         for ev in events:

@@ -15,7 +15,10 @@ is still waiting (:class:`Backlog`, e.g. a serial socket's ``bytes_queued`` and
 ``line_backlog``) -- and, when the transport has no figures (TCP), while the
 bytes in flight stay within twice the delivery rate times the smallest round
 trip the replies have shown (a bandwidth-delay product; 16 samples before the
-first measurement).  A STOP bypasses both.
+first measurement).  A STOP bypasses both, and is repeated (:data:`STOP_REPEAT`)
+until a REPLY says STOPPED: after a STOP the operator sends nothing else, so
+without a copy behind it a lost STOP waits for the transport's retransmission
+timer instead of being NAKed when the next packet shows the gap.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from ._teleop_packet import (
     TAG_SIZE,
     UNTAGGED,
     Reply,
+    ReplyStatus,
     Sample,
     TeleopKind,
     TeleopPacketError,
@@ -79,6 +83,14 @@ _RATE_SAMPLES = 16
 """Delivery-rate samples the window's rate is the maximum of: a few round trips of replies."""
 _RTT_HISTORY = 64
 """Samples remembered for matching replies to send times: at least the window."""
+STOP_REPEAT = 0.25
+"""s: the least time between copies of a STOP (each also waits for an idle line, so
+each is a packet of its own on the transport): a copy arrives about one STOP's line
+time after the one before, and the first that arrives shows a lost one as a gap."""
+MAX_STOP_COPIES = 8
+"""Copies of a STOP sent after the first, at most (bounded whatever the arm says):
+2 s of copies at :data:`STOP_REPEAT`, enough that a burst destroying a few of them
+still leaves one to reveal the loss; 8 x 24 bytes, 0.8 s of a 2400 bit/s line."""
 
 
 class _End(abc.ABC):
@@ -101,7 +113,7 @@ class _End(abc.ABC):
                 "packets_in packets_out bytes_in bytes_out bad_packets tag_failures replays "
                 "resyncs samples_offered samples_sent samples_coalesced samples_received "
                 "samples_superseded replies_sent replies_coalesced replies_received stops_sent "
-                "stops_received held_by_backlog held_by_window samples_after_stop"
+                "stops_received stops_repeated held_by_backlog held_by_window samples_after_stop"
             ).split(),
             0,
         )
@@ -148,9 +160,11 @@ class _End(abc.ABC):
     def receive_data(self, data: bytes, now: float) -> list[TeleopEvent]:
         """Feed bytes from the stream; returns what they meant.  Bad packets are counted."""
         events: list[TeleopEvent] = []
-        self._buf += data
         self._stats["bytes_in"] += len(data)
-        while self._state is not ChannelState.CLOSED and len(self._buf) >= HEADER_SIZE:
+        if self._closed():
+            return events  # a closed channel reads nothing more, so it keeps nothing
+        self._buf += data
+        while not self._closed() and len(self._buf) >= HEADER_SIZE:
             try:
                 kind, counter, size = decode_header(self._buf)
             except TeleopPacketError:
@@ -170,7 +184,12 @@ class _End(abc.ABC):
             del self._buf[:size]
             self._stats["packets_in"] += 1
             events += self._packet(kind, counter, raw, now)
+        if self._closed():
+            self._buf.clear()  # bytes behind the packet that closed it are nobody's
         return events
+
+    def _closed(self) -> bool:
+        return self._state is ChannelState.CLOSED
 
     def _packet(self, kind: TeleopKind, counter: int, raw: bytes, now: float) -> list[TeleopEvent]:
         if kind not in UNTAGGED and self._key is not None:
@@ -253,6 +272,10 @@ class OperatorChannel(_End):
         self._server_nonce = b""
         self._pending: Sample | None = None
         self._stopped = False  # after STOP no sample is sent on this channel
+        self._stop_last: float | None = None  # when the STOP or its last copy was queued
+        self._stop_copies = 0
+        self.stop_confirmed = False
+        """A REPLY said STOPPED after our STOP: no more copies."""
         self.granted: Granted | None = None
         # Rate adaptation: (sample number, cumulative bytes sent, send time).
         self._sent: deque[tuple[int, int, float]] = deque(maxlen=_RTT_HISTORY)
@@ -297,6 +320,36 @@ class OperatorChannel(_End):
         self._stats["stops_sent"] += 1
         self._send(TeleopKind.STOP, bytes(8))
 
+    @property
+    def repeating_stop(self) -> bool:
+        """A STOP is out, not yet confirmed by a REPLY, and copies remain to be sent
+        (the loop around this end keeps polling while so)."""
+        return (
+            self._stopped
+            and not self.stop_confirmed
+            and self._stop_copies < MAX_STOP_COPIES
+            and self._state is ChannelState.OPEN
+        )
+
+    def _repeat_stop(self, now: float, backlog: Backlog | None) -> bool:
+        """Queue the next copy of the STOP if it is due and the line is idle."""
+        if self._stop_last is None:
+            self._stop_last = now  # the first poll after the STOP: it has just been queued
+            return False
+        # With the transport's figures the first copy goes as soon as the STOP has left
+        # (the line idle again): then it is a packet of its own, and the earliest
+        # possible witness of a loss.  Without them (TCP) every copy waits the interval.
+        first = self._stop_copies == 0 and backlog is not None
+        if not first and now - self._stop_last < STOP_REPEAT:
+            return False
+        if backlog is not None and (backlog.queued_bytes > 0 or backlog.line_seconds > 0.0):
+            return False  # behind other bytes it would share their packet: wait for the line
+        self._stop_last = now
+        self._stop_copies += 1
+        self._stats["stops_repeated"] += 1
+        self._send(TeleopKind.STOP, bytes(8))
+        return True
+
     def window_bytes(self) -> float:
         """Bytes the path may hold in flight (without transport figures)."""
         size = size_of(TeleopKind.SAMPLE)
@@ -308,7 +361,10 @@ class OperatorChannel(_End):
         return self._bytes_sent_samples - self._bytes_acked
 
     def poll(self, now: float, backlog: Backlog | None = None) -> bool:
-        """Send the pending sample if the line can take it now; True if it went."""
+        """Send the pending sample (or a due copy of the STOP) if the line can take it
+        now; True if something went."""
+        if self.repeating_stop:
+            return self._repeat_stop(now, backlog)
         if self._state is not ChannelState.OPEN or self._pending is None:
             return False
         if backlog is not None:
@@ -384,6 +440,8 @@ class OperatorChannel(_End):
             self._stats["replies_received"] += 1
             self._acknowledge(reply, now)
             self.last_reply = reply
+            if self._stopped and reply.status is ReplyStatus.STOPPED:
+                self.stop_confirmed = True
             return [ReplyReceived(reply, now)]
         if kind is TeleopKind.BYE:
             return self._peer_bye(raw)
@@ -522,6 +580,8 @@ class ArmChannel(_End):
             return [SampleArrived(sample, now)]
         if kind is TeleopKind.STOP and st is ChannelState.OPEN:
             self._stats["stops_received"] += 1
+            if self.stopped:
+                return []  # a copy (OperatorChannel repeats STOP): latched already
             self.stopped = True
             self._latest = None
             return [StopArrived(now)]

@@ -240,11 +240,14 @@ def _head(kind: TeleopKind, counter: int) -> bytes:
 
 
 def decode_header(data: bytes | bytearray | memoryview) -> tuple[TeleopKind, int, int]:
-    """(kind, counter, size) from at least :data:`HEADER_SIZE` bytes.
+    """(kind, counter, size) from the first :data:`HEADER_SIZE` bytes.
 
     Raises :class:`TeleopPacketError` with ``resync`` set for a bad magic (the
-    reader skips to the next ``b"TT"``), else for a bad version or kind.
+    reader skips to the next ``b"TT"``), else for a bad version or kind; and
+    without ``resync`` for fewer bytes than a header (the reader never asks then).
     """
+    if len(data) < HEADER_SIZE:
+        raise TeleopPacketError(f"{len(data)} bytes: a header is {HEADER_SIZE}")
     magic, version, kind, counter = _HEAD.unpack_from(data)
     if magic != MAGIC:
         raise TeleopPacketError(f"magic {magic!r}, expected {MAGIC!r}", resync=True)

@@ -161,6 +161,8 @@ class ChannelStatistics:
     replies_received: int
     stops_sent: int
     stops_received: int
+    stops_repeated: int
+    """Operator: copies of its STOP sent after the first, until a REPLY said STOPPED."""
     held_by_backlog: int
     held_by_window: int
     samples_after_stop: int
