@@ -16,6 +16,18 @@ honest exchange with a client that holds the *wrong* key.
 * for all targets: ``receive_data`` and ``handle_timer`` never raise, the
   state never leaves CLOSED once there, and the input buffer stays below one
   packet after a call.
+
+A first byte of 0xF0 or more picks the **teleoperation channel** instead
+(tcpstream PROTOCOL.md section 14; its sans-I/O ends), the same way: packets
+of any kind with any counter and body and a guessed tag, raw bytes, and an
+honest exchange with an operator that holds the wrong key:
+
+* keyed arm (``ArmChannel``, even byte): no input ever produces
+  ``OperatorArrived``, ``SampleArrived`` or ``StopArrived``;
+* keyed operator (``OperatorChannel`` after its HELLO, odd byte): no input
+  ever produces ``Granted`` or ``ReplyReceived``;
+* both: ``receive_data`` never raises, CLOSED is never left, and less than
+  one packet stays buffered.
 """
 
 from __future__ import annotations
@@ -43,6 +55,24 @@ with instrumented(__name__ == "__main__"):
         ServerConnection,
         SessionParameters,
         SessionState,
+    )
+    from tcpstream.teleop import (
+        MAGIC as TELEOP_MAGIC,
+    )
+    from tcpstream.teleop import (
+        TELEOP_VERSION,
+        ArmChannel,
+        ChannelState,
+        OperatorArrived,
+        OperatorChannel,
+        ReplyReceived,
+        SampleArrived,
+        StopArrived,
+        TeleopKind,
+        size_of,
+    )
+    from tcpstream.teleop import (
+        Granted as TeleopGranted,
     )
 
 KEY = b"fuzz-harness-right-key-0123456789"
@@ -80,9 +110,64 @@ def _packet(r: Reader) -> bytes:
         return bytes(PACKET_SIZE)
 
 
+_TELEOP_KINDS = tuple(TeleopKind)
+_TELEOP_MAX = max(size_of(k) for k in TeleopKind)
+
+
+def _teleop_packet(r: Reader) -> bytes:
+    kind = _TELEOP_KINDS[r.byte() % len(_TELEOP_KINDS)]
+    counter = r.byte() if r.byte() % 2 else int.from_bytes(r.take(4).ljust(4, b"\0"), "big")
+    size = size_of(kind)
+    head = TELEOP_MAGIC + bytes([TELEOP_VERSION, kind]) + counter.to_bytes(4, "big")
+    return (head + r.take(r.byte())).ljust(size, b"\0")[:size]
+
+
+def _teleop_input(r: Reader, arm_end: bool) -> None:
+    now = 0.0
+    end: ArmChannel | OperatorChannel
+    honest: OperatorChannel | None = None
+    if arm_end:
+        end = ArmChannel(KEY, bytes(16), rate_deadman=1.0, control_rate=100.0)
+        honest = OperatorChannel("liar", WRONG_KEY, bytes(range(16)))
+    else:
+        end = OperatorChannel("fuzz", KEY, bytes(16))
+        end.connect()
+        end.data_to_send()
+    was_closed = False
+    while r.remaining:
+        op = r.byte() % 4
+        now += 0.01
+        if op in (0, 1):
+            events = end.receive_data(_teleop_packet(r), now)
+        elif op == 2:
+            events = end.receive_data(r.take(r.byte()), now)
+        elif honest is not None:
+            if honest.state is ChannelState.IDLE:
+                honest.connect()
+            events = end.receive_data(honest.data_to_send(), now)
+            honest.receive_data(end.data_to_send(), now)
+        else:
+            events = []
+        for event in events:
+            if isinstance(event, (OperatorArrived, SampleArrived, StopArrived)):
+                raise AssertionError(f"keyed teleop arm let {event!r} through without the key")
+            if isinstance(event, (TeleopGranted, ReplyReceived)):
+                raise AssertionError(f"keyed teleop operator took {event!r} from a keyless arm")
+        end.data_to_send()
+        if was_closed and end.state is not ChannelState.CLOSED:
+            raise AssertionError(f"teleop end left CLOSED for {end.state}")
+        was_closed = end.state is ChannelState.CLOSED
+        if len(end._buf) >= _TELEOP_MAX:
+            raise AssertionError(f"{len(end._buf)} teleop bytes left unparsed")
+
+
 def one_input(data: bytes) -> None:
     r = Reader(data)
-    target = r.byte() % 3
+    first = r.byte()
+    if first >= 0xF0:
+        _teleop_input(r, arm_end=first % 2 == 0)
+        return
+    target = first % 3
     now = 0.0
     conn: ServerConnection | ClientConnection
     honest: ClientConnection | None = None

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hypothesis.strategies as st
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
@@ -196,3 +197,16 @@ class ChannelMachine(RuleBasedStateMachine):
 
 
 TestChannelMachine = ChannelMachine.TestCase
+
+
+def test_the_session_harness_catches_a_teleop_arm_that_skips_the_key(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """fuzz/fuzz_session.py's teleoperation property can fail: an arm without the key
+    lets the wrong-key operator's HELLO through, and the harness says so."""
+    from fuzz import fuzz_session
+
+    fuzz_session.one_input(b"\xf0\x03\x03\x03")  # keyed: the liar is refused
+    monkeypatch.setattr(fuzz_session, "KEY", None)
+    with pytest.raises(AssertionError, match="without the key"):
+        fuzz_session.one_input(b"\xf0\x03\x03\x03")
