@@ -19,7 +19,7 @@ from __future__ import annotations
 import io
 import math
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TextIO
 
@@ -98,6 +98,10 @@ class ConsoleSnapshot:
     force: str | None = None
     """Seed 004's force data as far as the arm reports it: the commanded grip
     force while holding (SQUEEZE's reply) and the last weighed mass (WEIGH)."""
+    teleop: tuple[str, ...] = ()
+    """While teleoperating (mode ``teleoperating``): the teleoperation view's lines
+    (:func:`linksim.teleop.render_view`) -- mode and buttons, force/torque bars,
+    predicted vs confirmed hand, setpoint age, the sample channel's link."""
 
 
 def _bar(q: float, lo: float, hi: float) -> str:
@@ -178,6 +182,8 @@ def _state_lines(s: ConsoleSnapshot) -> list[str]:
 
 
 def _model_line(s: ConsoleSnapshot) -> str:
+    if s.mode == "teleoperating":
+        return "model: the hand's own increments (predicted) against the arm's replies (confirmed)"
     if s.mode == "observer":
         return "model: none (an observer does not see the commands, so it predicts nothing)"
     text = (
@@ -194,7 +200,9 @@ def render_plain(s: ConsoleSnapshot) -> str:
     lines = [f"{s.title}  [{s.mode}]  t={s.clock:.2f} s"]
     if s.preview:
         lines.append(f"preview: {s.preview}")
-    lines += _state_lines(s)
+    lines += s.teleop
+    if not s.teleop or s.confirmed is not None:
+        lines += _state_lines(s)
     if s.commands:
         lines.append(" #  state      sent  accepted   done  model  command")
         for r in s.commands:
@@ -313,6 +321,23 @@ def _queue_table(s: ConsoleSnapshot, start: int, stop: int) -> Table:
     return queue
 
 
+def _state_parts(
+    s: ConsoleSnapshot, detail: int, line: Callable[[str], Text]
+) -> list[RenderableType]:
+    """The joint and pose tables at ``detail``."""
+    parts: list[RenderableType] = []
+    if detail < 3:
+        parts.append(_joint_table(s, bars=detail < 2))
+    if detail < 2:
+        parts.append(_pose_table(s, vectors=detail < 1))
+    elif detail == 3:
+        parts += _joint_lines(s)
+    else:
+        gripper = f"gripper: confirmed {_gripper(s.confirmed)}, predicted {_gripper(s.predicted)}"
+        parts.append(line(gripper))
+    return parts
+
+
 def _parts(
     s: ConsoleSnapshot, detail: int, window: tuple[int, int] | None, fit: bool
 ) -> list[RenderableType]:
@@ -326,15 +351,11 @@ def _parts(
     parts: list[RenderableType] = [line(f"{s.title}  [{s.mode}]  t={s.clock:.2f} s", "bold")]
     if s.preview and detail < 2:
         parts.append(line("preview: " + s.preview))
-    if detail < 3:
-        parts.append(_joint_table(s, bars=detail < 2))
-    if detail < 2:
-        parts.append(_pose_table(s, vectors=detail < 1))
-    elif detail == 3:
-        parts += _joint_lines(s)
-    else:
-        gripper = f"gripper: confirmed {_gripper(s.confirmed)}, predicted {_gripper(s.predicted)}"
-        parts.append(line(gripper))
+    # The teleoperation view is the point of the frame while teleoperating: never cut.
+    parts += [Text(t, no_wrap=True, overflow="ellipsis") for t in s.teleop]
+    if not s.teleop or s.confirmed is not None:
+        # (Teleoperating without command telemetry the tables would be all dashes.)
+        parts += _state_parts(s, detail, line)
     if s.commands and window is not None:
         start, stop = window
         parts.append(_queue_table(s, start, stop))
@@ -437,6 +458,9 @@ class ConsoleSession:
         self._log = log
         self.link: LinkProbe | None = link
         """Returns the link figures shown (RTT, window occupancy, retransmissions...)."""
+        self.teleop: Callable[[], Sequence[str]] | None = None
+        """While teleoperating: returns the teleoperation view's lines (the console's
+        ``teleoperating`` mode; ``linksim teleop --live`` sets it)."""
         self._model = model
         self._seen: dict[int, CommandState] = {}
         self._out = out if out is not None else sys.stderr
@@ -458,6 +482,11 @@ class ConsoleSession:
         else:
             print(render_plain(self.snapshot()), file=self._out, flush=True)
         return self
+
+    @property
+    def is_live(self) -> bool:
+        """Redrawn in place (a terminal), rather than printed as lines."""
+        return self._live_wanted
 
     def __exit__(self, *exc: object) -> None:
         if self._live is not None:
@@ -607,7 +636,7 @@ class ConsoleSession:
         return ConsoleSnapshot(
             title=self.title,
             clock=self._clock() - self._origin,
-            mode="observer" if self.run is None else "driving",
+            mode=self._mode(),
             confirmed=p.confirmed,
             predicted=None if self.run is None else p.predicted,
             lower=self._model.lower,
@@ -623,7 +652,13 @@ class ConsoleSession:
             preview=None if self.preview is None else self._preview_text(self.preview),
             status=self.status,
             force=self._force(),
+            teleop=tuple(self.teleop()) if self.teleop is not None else (),
         )
+
+    def _mode(self) -> str:
+        if self.teleop is not None:
+            return "teleoperating"
+        return "observer" if self.run is None else "driving"
 
     def _force(self) -> str | None:
         """Grip force and weighed mass from the completed commands' replies."""

@@ -15,6 +15,7 @@ import contextlib
 import math
 import random
 import sys
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -22,6 +23,8 @@ import numpy as np
 import trio
 
 from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
+from linksim.control import ConsoleSession
+from linksim.control._console import render_plain
 from linksim.link import (
     LinkConfig,
     rtt_hint_for,
@@ -34,6 +37,7 @@ from tcpstream.teleop import (
     Sample,
     TeleopArm,
     TeleopMode,
+    TeleopOperator,
     TeleopRefused,
     open_teleop,
 )
@@ -44,7 +48,7 @@ from ._keyboard import KeyboardScript, read_keys
 from ._operator import Intent, Operator, Script, peg_script, surface_script
 from ._remote import RemoteArm, RemoteConfig, rate_deadman, rotation
 from ._transport import SAMPLE_RATE, SerialFigures, line_interval, open_channels
-from ._view import LiveView, ViewState, render
+from ._view import ViewState, render
 
 __all__ = [
     "CONTROL_RATE",
@@ -97,6 +101,8 @@ class TeleopOptions:
     duration: float | None = None
     """Script seconds to run (default: the script, then the line's round trip and 1 s)."""
     timeout: float = 600.0
+    link: LinkConfig | None = None
+    """The line itself, instead of ``preset`` and ``seed`` (e.g. with scripted faults)."""
 
 
 @dataclass
@@ -166,7 +172,7 @@ def percentile(values: list[float], q: float) -> float:
 
 async def run_teleop(options: TeleopOptions) -> TeleopReport:
     """One run on whatever clock trio has (virtual under ``run_virtual``)."""
-    link = LinkConfig.preset(options.preset, seed=options.seed)
+    link = options.link or LinkConfig.preset(options.preset, seed=options.seed)
     one_way = link.a_to_b.delay + link.a_to_b.jitter
     keys = KeyboardScript() if options.keyboard else None
     script: Intent = keys if keys is not None else script_for(options.task, options.mode)
@@ -203,7 +209,18 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
     )
     executor = TeleopExecutor(remote, on_stop)
     view = _ViewFeed(operator, remote.config.force_limit, one_way)
-    live = LiveView()
+    console = (
+        ConsoleSession(
+            f"linksim teleop: {options.mode.name.lower()}, {options.task}, {options.scheme}",
+            DEFAULT_WORLD,
+            run=None,
+            clock=trio.current_time,
+            origin=trio.current_time(),
+            out=sys.stderr,
+        )
+        if options.live
+        else None
+    )
     error: str | None = None
     op_stats = None
     final_view: ViewState | None = None
@@ -256,13 +273,31 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                             nonce_source=rng.randbytes,
                         )
                     )
+                    if console is not None:
+                        # The console's teleoperating mode: the view, and the line's figures.
+                        console.teleop = lambda: render(
+                            view.state(trio.current_time(), op.statistics())
+                        )
+                        console.link = _link_probe(figures, op)
+                        if console.is_live:
+                            stack.enter_context(console)
                     t0 = trio.current_time()
                     dt = 1.0 / SAMPLE_RATE
                     k = 0
                     if keys is not None:
                         nursery.start_soon(read_keys, keys)
-                    while k * dt <= duration and not (keys is not None and keys.done):
+                    # After the script the hand controller is still sampled until the
+                    # channel has taken its newest sample (the writer runs while this
+                    # loop sleeps): a sample left waiting for the line with nothing newer
+                    # behind it would be sent late -- an age that an operator who keeps
+                    # sampling never sees.  Bounded by one round trip of the line.
+                    last = duration + 2 * one_way
+                    while not (keys is not None and keys.done):
                         await trio.sleep_until(t0 + k * dt)
+                        if k * dt > duration and (
+                            k * dt > last or stop_sent is not None or op.channel.pending is None
+                        ):
+                            break
                         now = trio.current_time()
                         stop = options.stop_at
                         if keys is not None and keys.stop_requested:
@@ -276,8 +311,8 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
                         if stop_sent is None:
                             view.sample = operator.sample(now - t0, dt, stamp=now)
                             op.submit(view.sample)
-                        if options.live and k % LIVE_EVERY == 0:
-                            live.draw(view.state(now, op.statistics()))
+                        if console is not None and k % LIVE_EVERY == 0:
+                            console.refresh()
                         k += 1
                     # Let the last sample and its reply cross the line before counting.
                     await trio.sleep(2 * one_way + 2 * line_interval(link) + 0.1)
@@ -289,8 +324,10 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
             nursery.cancel_scope.cancel()
     if scope.cancelled_caught:
         error = f"the run did not finish within {options.timeout:g} s"
-    if options.live and final_view is not None and not live.enabled:
-        print("\n".join(render(final_view)), file=sys.stderr)
+    if console is not None and final_view is not None and not console.is_live:
+        shown = final_view
+        console.teleop = lambda: render(shown)
+        print(render_plain(console.snapshot()), file=sys.stderr)  # the final frame only
     return _report(
         options,
         remote,
@@ -308,6 +345,28 @@ async def run_teleop(options: TeleopOptions) -> TeleopReport:
 
 LIVE_EVERY = 26
 """Samples between redraws of the live view: four a second."""
+
+
+def _link_probe(
+    figures: dict[str, SerialFigures], op: TeleopOperator
+) -> Callable[[], Mapping[str, Any]]:
+    """The console's link line: the serial socket's own figures, or (TCP) the sample
+    channel's."""
+
+    def probe() -> Mapping[str, Any]:
+        line = figures.get("operator")
+        if line is not None:
+            return line.link_figures()
+        st = op.statistics()
+        return {
+            "rtt_s": st.min_rtt if st.min_rtt is not None else math.nan,
+            "packets_sent": st.packets_out,
+            "packets_received": st.packets_in,
+            "bytes_sent": st.bytes_out,
+            "bytes_received": st.bytes_in,
+        }
+
+    return probe
 
 
 class _ViewFeed:

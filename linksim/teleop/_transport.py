@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import functools
 from collections.abc import AsyncIterator, Callable
+from typing import Any
 
 import trio
 
@@ -36,9 +37,9 @@ class SerialFigures:
     as of the endpoint's last event and goes stale while the link is idle, so
     the line's queue is followed from the socket's ``port_bytes_out`` instead:
     every byte written to the port takes one character time of the line, and
-    the line drains at its rate.  ``slack`` (one sample's line time) is
-    forgiven: a sample handed over then waits behind nothing of ours, and at
-    most one sample is ever in the line's queue.
+    the line drains at its rate.  ``slack`` seconds of that queue are
+    forgiven (both ends use none: what is handed over then waits behind nothing
+    of ours, and at most one sample or reply is ever in the line's queue).
     """
 
     def __init__(self, sock: SerialSocket, char_time: float, slack: float) -> None:
@@ -62,6 +63,19 @@ class SerialFigures:
         self.max_queued = max(self.max_queued, st.link.bytes_queued)
         return Backlog(st.link.bytes_queued, max(0.0, self._line - self._slack))
 
+    def link_figures(self) -> dict[str, Any]:
+        """What the console's link line shows: the socket's own figures."""
+        s = self._sock.statistics().link
+        return {
+            "rtt_s": s.smoothed_rtt,
+            "retransmissions": s.retransmissions,
+            "check_failures": s.check_failures,
+            "packets_sent": s.packets_sent,
+            "packets_received": s.packets_received,
+            "bytes_sent": s.bytes_acknowledged,
+            "bytes_received": s.bytes_delivered,
+        }
+
 
 @contextlib.asynccontextmanager
 async def _streams(
@@ -74,9 +88,13 @@ async def _streams(
     if transport == "serial":
         pair = _pty_pair(link) if real else serial_socket_pair(link)
         async with pair as (ctl, arm):
-            slack, char = line_interval(link), link.a_to_b.char_time
+            char = link.a_to_b.char_time
             holder["operator"] = SerialFigures(ctl, char, 0.0)
-            yield ctl, arm, holder["operator"], SerialFigures(arm, char, slack)
+            # No slack at the arm either: a reply let in behind the one on the line (it
+            # had a sample's line time of slack) kept every ACK and NAK of the sample
+            # stream behind up to two replies, 1.3 s at 2400 bit/s (a lost STOP took
+            # 5.45 s to reach the arm with it, 4.84 s without).
+            yield ctl, arm, holder["operator"], SerialFigures(arm, char, 0.0)
         return
     d = link.a_to_b
     line = LinkConfig.symmetric(DirectionConfig(delay=d.delay, jitter=d.jitter))

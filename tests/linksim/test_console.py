@@ -291,3 +291,46 @@ def test_force_line_from_squeeze_and_weigh_replies() -> None:
         record.result = CommandResult(outcome.feedback, outcome.aux)
     assert session.snapshot().force == "weighed 0.850 kg"  # let go in the bin
     assert "force: weighed 0.850 kg" in render_plain(session.snapshot())
+
+
+def _teleop_view_lines() -> list[str]:
+    from linksim.teleop._view import ViewState
+    from linksim.teleop._view import render as render_view
+    from tcpstream.teleop import Buttons, ContactFlags, Reply, ReplyStatus, Sample, TeleopMode
+
+    six = (0.0, 0.0, 20.0, 0.5, -0.5, 0.0)
+    sample = Sample(900, TeleopMode.CARTESIAN, Buttons.ENGAGED, 64, 10.0, (0.0,) * 6)
+    reply = Reply(880, ReplyStatus.FOLLOWING, ContactFlags.CONTACT, 2, 64, 8.0, 0.01, six, six, six)
+    state = ViewState(11.9, sample, reply, 11.0, (0.4, -0.15, 0.06), None, 50.0, 1.3)
+    return render_view(state)
+
+
+def test_the_console_shows_the_teleoperation_view_while_teleoperating() -> None:
+    """Issue 22: the console gains a teleoperation view (mode and buttons, force/torque
+    bars, predicted vs confirmed hand, setpoint age, the link) -- its teleoperating mode,
+    which ``linksim teleop --live`` draws."""
+    lines = _teleop_view_lines()
+    session = ConsoleSession(
+        "teleop", DEFAULT_WORLD, run=None, clock=lambda: 3.0, origin=0.0, out=io.StringIO()
+    )
+    session.teleop = lambda: lines
+    session.link = lambda: {"rtt_s": 2.75, "retransmissions": 1}
+    snap = session.snapshot()
+    assert snap.mode == "teleoperating"
+    assert snap.teleop == tuple(lines)
+    plain = render_plain(snap).splitlines()
+    # Without command telemetry the joint table would be all dashes: the view replaces it.
+    assert plain == [
+        "teleop  [teleoperating]  t=3.00 s",
+        *lines,
+        "link: RTT 2.75 s, retransmissions 1",
+        "model: the hand's own increments (predicted) against the arm's replies (confirmed)",
+    ]
+    assert "Fz    20.00 N" in plain[5]
+    # On an 80 x 24 terminal every line of the view stays, one row each.
+    out = io.StringIO()
+    Console(file=out, width=80, height=24, color_system=None).print(render(snap, 24, 80))
+    rows = out.getvalue().splitlines()
+    assert len(rows) == len(plain)
+    for line, row in zip(lines, rows[1:], strict=False):
+        assert row.rstrip()[:60] == line.rstrip()[:60]

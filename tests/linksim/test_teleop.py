@@ -4,11 +4,12 @@ stepped by hand), and whole runs over the teleoperation channel on virtual time.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from linksim.link import run_virtual
+from linksim.link import DirectionConfig, FaultAction, LinkConfig, ScriptedFault, run_virtual
 from linksim.teleop import (
     ContactModel,
     HandController,
@@ -279,6 +280,44 @@ def test_emergency_stop_during_streaming_overtakes_every_sample(preset: str, bou
     assert r.samples_after_stop == 0
     assert r.stop_to_arm_s is not None
     assert 1.3 < r.stop_to_arm_s < bound
+
+
+@pytest.mark.long  # ~6 s of CPU
+def test_without_losses_no_sample_is_applied_older_than_one_way_and_half_a_second() -> None:
+    """Issue 22's age target on noisy-moon's line without its errors (2400 bit/s, 1.3 s):
+    every sample waits for the line behind nothing of ours.  Regression: the run stopped
+    sampling at the end of its script, and its last sample, waiting for the line with
+    nothing newer to replace it, was applied 0.2-0.4 s later than the rest (max 1.93 s)."""
+    line = DirectionConfig(rate=2400, delay=1.3)
+    r = run_virtual(
+        run_teleop, TeleopOptions(task="surface", link=LinkConfig(a_to_b=line, b_to_a=line))
+    )
+    assert r.ok
+    assert r.setpoint_age_s["max"] <= 1.3 + 0.5
+
+
+@pytest.mark.long  # ~5 s of CPU
+def test_a_lost_stop_is_repaired_when_its_copy_shows_the_gap() -> None:
+    """The STOP's packet is dropped on a 2400 bit/s, 1.3 s line.  Nothing else follows a
+    STOP, so before its copies the serial socket's retransmission timer repaired it:
+    7.26 s from the press to the arm.  The first copy leaves when the STOP has, the arm's
+    socket NAKs the gap, and the resend arrives one round trip after the copy: about
+    three one-way delays plus the line times of the STOP, its copy, a reply ahead of the
+    NAK and the resend."""
+    stop_packet = ScriptedFault(
+        FaultAction.DROP, packet=1, starts_with=b"\x01??DTT#A#H", wildcard=ord("?")
+    )
+    line = DirectionConfig(rate=2400, delay=1.3)
+    link = LinkConfig(a_to_b=replace(line, faults=(stop_packet,)), b_to_a=line)
+    r = run_virtual(
+        run_teleop, TeleopOptions(task="surface", link=link, stop_at=5.0, duration=12.0)
+    )
+    assert r.ok
+    assert r.stop_to_arm_s is not None
+    # Above three one-way delays: the STOP was lost (if not, the pattern above no longer
+    # matches the serial socket's encoding of a STOP packet and needs updating).
+    assert r.stop_to_arm_s > 3 * 1.3, "no loss: does the pattern still match a STOP packet?"
+    assert r.stop_to_arm_s < 3 * 1.3 + 1.5
 
 
 def test_command_session_emergency_stop_beside_the_samples_on_one_line() -> None:
