@@ -28,8 +28,12 @@ sequence numbers mod 64 and windows up to 31, a packet replayed after the
 receiver moved on by more than 32 packets is indistinguishable from a new one
 -- for this protocol and for Kermit alike -- so such a failure would be the
 model's fault, not the endpoint's.  For the same reason the block check is
-fixed at CRC-16, which catches every 1-, 2- or 3-bit error in a packet (the
-additive 6- and 12-bit checks can be fooled by two compensating flips).
+CRC-16 or CRC-32 (drawn per side; agreed between two dense ends), which catch
+every 1-, 2- or 3-bit error in a packet (the additive 6- and 12-bit checks
+can be fooled by two compensating flips).  Each side also draws its line
+profile (printable or 8-bit), whether it offers the dense encodings, and
+XON/XOFF: the ends then talk the Kermit prefix profile, the radix-91 packing
+or the escape code (PROTOCOL.md section 10), so all of them cross the wire.
 
 Liveness is kept out of the impairment phase by configuration: ``dead_after``
 and ``connect_timeout`` are 10**6 s and retries are unlimited, so no amount of
@@ -96,7 +100,7 @@ from serialsocket import (
     State,
 )
 from serialsocket.argtypes import ENDPOINT_LENGTH
-from serialsocket.packets import EIGHT_BIT_CLEAN, MAX_PACKET_LENGTH, PRINTABLE
+from serialsocket.packets import EIGHT_BIT_CLEAN, MAX_PACKET_LENGTH, PRINTABLE, BlockCheck
 
 __all__ = [
     "FINISH_MAX_EVENTS",
@@ -232,6 +236,9 @@ _LENGTHS = st.one_of(
 _DELAYS = st.sampled_from([0.0, 0.001, 0.02, 0.25, 1.3])
 _RATES = st.sampled_from([None, None, 300.0, 2400.0, 9600.0, 115200.0])
 _ENCODINGS = st.sampled_from([PRINTABLE, EIGHT_BIT_CLEAN])
+_CHECKS = st.sampled_from([BlockCheck.CRC16, BlockCheck.CRC16, BlockCheck.CRC32])
+"""CRC-32 in a third of the draws: asked for by one side, it is agreed
+between two dense ends (PROTOCOL.md section 10.2)."""
 _LONG_WINDOWS = st.sampled_from([None, 32, 100, 4095, 131071])
 
 
@@ -247,6 +254,11 @@ def endpoint_configs(
         long_window=draw(_LONG_WINDOWS),
         max_packet_length=draw(_LENGTHS),
         encoding=draw(_ENCODINGS),
+        # The dense encodings (escape code or radix 91, by the line) are used
+        # when both sides offer them: three draws in four each.
+        dense=draw(st.sampled_from([True, True, True, False])),
+        check=draw(_CHECKS),
+        xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
         line_rate=line_rate,
         send_buffer=draw(st.one_of(st.integers(1, 64), st.integers(1, 8192), st.just(64 * 1024))),

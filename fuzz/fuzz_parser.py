@@ -23,14 +23,18 @@ with instrumented(__name__ == "__main__"):
     from serialsocket.packets import (
         EIGHT_BIT_CLEAN,
         PRINTABLE,
+        XON_XOFF,
         BlockCheck,
+        EscapeEncoding,
         PacketParser,
         PacketReceived,
         PacketRejected,
+        Radix91Encoding,
         build_packet,
     )
 
-_CHECKS = (BlockCheck.SUM6, BlockCheck.SUM12, BlockCheck.CRC16)
+_CHECKS = tuple(BlockCheck)
+_DENSE = (EscapeEncoding(), EscapeEncoding(unsafe=XON_XOFF), Radix91Encoding())
 
 
 def _decoded(decode: object, data: bytes) -> bytes | str:
@@ -44,7 +48,7 @@ def one_input(data: bytes) -> None:
     if len(data) < 3:
         return
     max_length = 12 + int.from_bytes(data[:2], "big") % 9020
-    check = _CHECKS[data[2] % 3]
+    check = _CHECKS[data[2] % len(_CHECKS)]
     stream = data[3:]
     parser = PacketParser(max_length=max_length, check=check)
     pos = 0
@@ -65,6 +69,10 @@ def one_input(data: bytes) -> None:
                     slow = _decoded(enc._decode_sequential, event.packet.data)
                     if fast != slow:
                         raise AssertionError(f"decoders disagree: {fast!r} != {slow!r}")
+                for dense in _DENSE:
+                    plain = _decoded(dense.decode, event.packet.data)
+                    if isinstance(plain, bytes) and dense.encode(plain) != event.packet.data:
+                        raise AssertionError(f"{dense!r} accepted a non-canonical field")
             elif not isinstance(event, PacketRejected):
                 raise AssertionError(f"unexpected event {event!r}")
         if parser.buffered > max(max_length, len(chunk)) + len(chunk):

@@ -28,11 +28,13 @@ import tty
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
+from ._encoding import Encoding
 from ._pyserial import (
     THREAD_READ_TIMEOUT,
     PortStatistics,
     check_line_settings,
     open_serial,
+    port_encoding,
     read_blocks_for_one_byte,
 )
 
@@ -95,6 +97,11 @@ class AsyncioSerialPort:
         self._closed = False
         self._reading = self._writing = False
         self._bytes_in = self._bytes_out = self._reads = self._writes = self._errors = 0
+
+    @property
+    def encoding(self) -> Encoding:
+        """The prefix profile this line carries (see ``SerialPort.encoding``)."""
+        return port_encoding(self.serial)
 
     def statistics(self) -> PortStatistics:
         """A snapshot of the counters."""

@@ -10,12 +10,12 @@ value 0x2189 for "123456789").  It is computed by crcmod's predefined
 CRC-16/XMODEM.  The 16-bit value is sent high to low as 4+6+6 bits through
 ``tochar``, not byte-swapped.
 
-CRC-32 (:func:`crc32_ieee`, :func:`crc32_chars`) is the stronger check offered
-for long packets on clean lines (issue 21; serialsocket/DENSE.md): the
-ZMODEM / IEEE 802.3 CRC (poly 0x04C11DB7 reflected, init and final XOR
-0xFFFFFFFF; check value 0xCBF43926 for "123456789"), computed by
-:func:`zlib.crc32`.  It is not a Kermit block-check type and is not negotiated
-yet, so it has no :class:`BlockCheck` member.
+CRC-32 (:data:`BlockCheck.CRC32`, :func:`crc32_ieee`, :func:`crc32_chars`) is
+the stronger check two telelink endpoints negotiate in the init exchange's
+XCAPAS field (PROTOCOL.md section 10; serialsocket/DENSE.md): the ZMODEM /
+IEEE 802.3 CRC (poly 0x04C11DB7 reflected, init and final XOR 0xFFFFFFFF;
+check value 0xCBF43926 for "123456789"), computed by :func:`zlib.crc32`.  It
+is not a Kermit block-check type: it never appears in the CHKT field.
 """
 
 from __future__ import annotations
@@ -67,10 +67,15 @@ class BlockCheck(enum.IntEnum):
     is >= 4096 (reference/kermit.md section 2)."""
     CRC16 = 3
     """Type 3: CRC-16/KERMIT, three characters.  telelink's default."""
+    CRC32 = 6
+    """CRC-32/ISO-HDLC, six characters (:func:`crc32_chars`): telelink to
+    telelink only, agreed through XCAPAS (PROTOCOL.md section 10), never sent
+    in CHKT.  Its value is its length, as for the Kermit types, so
+    ``int(check)`` is the check's width everywhere."""
 
 
 def check_length(check: BlockCheck) -> int:
-    """Number of characters the check occupies in a packet (1, 2 or 3)."""
+    """Number of characters the check occupies in a packet (1, 2, 3 or 6)."""
     return int(check)
 
 
@@ -82,8 +87,10 @@ def check_chars(check: BlockCheck, covered: bytes) -> bytes:
         covered: the exact bytes from LEN through the last DATA byte.
 
     Returns:
-        1, 2 or 3 bytes, each in 32..95.
+        1, 2, 3 or 6 bytes, each in 32..95.
     """
+    if check is BlockCheck.CRC32:
+        return crc32_chars(covered)
     if check is BlockCheck.CRC16:
         crc = crc16_kermit(covered)
         return bytes(((crc >> 12 & 0x0F) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32))

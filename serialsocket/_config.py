@@ -10,13 +10,13 @@ timers of a few milliseconds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 
 from ._checks import BlockCheck
-from ._encoding import PRINTABLE, Encoding
+from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._packet import data_capacity
-from ._params import MAX_LONG_WINDOW
+from ._params import DENSE_FEATURES, FEATURE_XON_XOFF, MAX_LONG_WINDOW
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
@@ -27,6 +27,7 @@ __all__ = [
     "UNHINTED_CONNECT_TIMEOUT",
     "UNMEASURED_DEAD_AFTER",
     "EndpointConfig",
+    "line_encoding",
 ]
 
 MAX_WINDOW = 31
@@ -34,9 +35,9 @@ MAX_WINDOW = 31
 window to be at most half the space (Kermit's 31; E-Kermit P_WSLOTS)."""
 
 MIN_ENDPOINT_PACKET_LENGTH = 37
-"""The init packet is 37 characters (30 data + header + CRC; 33 without the
-long-sequence offer): each side must receive it, so no endpoint may announce
-less (MIN_PACKET_LENGTH bounds the packet layer alone)."""
+"""The init packet is 37 characters (30 data + header + CRC; 34 without the
+long-sequence offer, 33 with no XCAPAS at all): each side must receive it, so
+no endpoint may announce less (MIN_PACKET_LENGTH bounds the packet layer alone)."""
 
 DEFAULT_BUFFER_CAP = 16 * 1024 * 1024
 """Most bytes the receive buffer grows to with the bandwidth-delay product:
@@ -73,6 +74,13 @@ _ACK_WIRE = 10
 """Wire bytes of an ACK (MARK LEN SEQ TYPE + 2 data + 3 CRC + CR)."""
 
 
+def line_encoding(bytesize: int = 8, parity: str = "N") -> Encoding:
+    """The prefix profile a line with this character format carries: 8 data
+    bits without parity (8N1) are 8-bit clean, anything else (7 data bits,
+    any parity) is printable only (PROTOCOL.md section 8)."""
+    return EIGHT_BIT_CLEAN if bytesize == 8 and parity == "N" else PRINTABLE
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class EndpointConfig:
     """What one side of a link wants; the init exchange negotiates the rest.
@@ -94,8 +102,31 @@ class EndpointConfig:
             slow line, while a narrow one starves a long fast one (16 at
             9600 bit/s, 1.3 s keeps the line busy 78 % of the time).
         check: block check asked for (CRC-16 by default).
-        encoding: prefix profile; PRINTABLE asks for 8th-bit prefixing so the
-            line carries only printable ASCII plus SOH and CR.
+            ``BlockCheck.CRC32`` asks a telelink peer for CRC-32 (PROTOCOL.md
+            10.3; offered anyway when the packet length needs it); a peer
+            that does not agree gets CRC-16.
+        encoding: what the line carries.  PRINTABLE (8th-bit prefixing) for
+            a line that carries only printable ASCII plus SOH and CR (7 data
+            bits, parity, a terminal server); EIGHT_BIT_CLEAN for an 8-bit
+            clean line (8N1).  None (the default): from the line --
+            ``connect``/``accept``/``listen`` over a port from ``open_port``
+            take its character format (8N1: 8-bit; 7 bits or parity:
+            printable; :func:`line_encoding`), anything else is taken as
+            printable.  Between two telelink ends with ``dense`` the agreed
+            data encoding is then the escape code or the radix-91 packing;
+            with a classic or older peer, this prefix profile.
+        dense: offer the dense encodings (XCAPAS bits 2 and 4, PROTOCOL.md
+            section 10): about 1.01 wire characters per random byte on an
+            8-bit line where Kermit prefixing costs 1.27.  Off by default,
+            because they have no run-length compression: a command channel's
+            fixed-size packets, mostly runs of zero bytes, took 3.6 times
+            the characters with them (tcpstream over the moon preset), so
+            only byte streams of arbitrary content should turn it on (the
+            ``serialsocket listen/connect`` netcat does; ``--no-dense`` there).
+            False sends the classic init (no XCAPAS unless long sequence
+            numbers are offered) and answers a request classically.
+        xon_xoff: the line uses software flow control: the escape code must
+            escape XON/XOFF as well (declared in XCAPAS, bit 32).
         one_way_delay: a hint: the link's one-way propagation delay in
             seconds (1.3 for the Earth-Moon path), 0 when unknown.  Sets the
             first timeout and the floor under every later one; the round
@@ -149,7 +180,9 @@ class EndpointConfig:
     window: int = MAX_WINDOW
     long_window: int | None = MAX_LONG_WINDOW
     check: BlockCheck = BlockCheck.CRC16
-    encoding: Encoding = field(default=PRINTABLE)
+    encoding: Encoding | None = None
+    dense: bool = False
+    xon_xoff: bool = False
     one_way_delay: float = 0.0
     line_rate: float | None = None
     bits_per_char: int = 10
@@ -314,6 +347,30 @@ class EndpointConfig:
             and self.line_rate is not None
             and not self._window_covers(self.derived_max_packet_length())
         )
+
+    def line_encoding(self) -> Encoding:
+        """``encoding``, or PRINTABLE when it is left to the line and no
+        line was seen (a sans-I/O endpoint: printable is safe on any line)."""
+        return PRINTABLE if self.encoding is None else self.encoding
+
+    def for_line(self, port: object) -> EndpointConfig:
+        """This configuration with ``encoding`` chosen from ``port`` if None:
+        the port's ``encoding`` attribute (a :class:`SerialPort` from
+        ``open_port`` has one: :func:`line_encoding` of its format), else
+        unchanged (PRINTABLE then applies)."""
+        if self.encoding is not None:
+            return self
+        chosen = getattr(port, "encoding", None)
+        if not isinstance(chosen, Encoding):
+            return self
+        return replace(self, encoding=chosen)
+
+    def init_features(self) -> int | None:
+        """The XCAPAS feature bits this side offers besides long sequence
+        numbers (PROTOCOL.md section 10), or None for the classic init."""
+        if not self.dense:
+            return None
+        return DENSE_FEATURES | (FEATURE_XON_XOFF if self.xon_xoff else 0)
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

@@ -1,4 +1,4 @@
-"""Dense data-field encodings for telelink-to-telelink links (issue 21; not yet negotiated).
+"""Dense data-field encodings for telelink-to-telelink links (issue 21; PROTOCOL.md section 10).
 
 Kermit's prefix encoding (``_encoding``) costs 1.27 wire characters per random
 byte on an 8-bit line and 1.78 on a printable one.  Two denser encodings of a
@@ -18,10 +18,12 @@ ratios: serialsocket/DENSE.md):
   default prefixes ``#&~`` -- so a dense field is also a prefix-encoded field
   that decodes to itself (a classic decoder or packet trace sees it verbatim).
 
-Both decode exactly one packet's data field (tokens never cross fields; the
-field's length alone tells where a radix-91 field's short tail is), accept
-only the canonical encoding of some byte string (every field has one decoding
-and every byte string one encoding), and raise
+Two telelink endpoints agree on them in the init exchange (XCAPAS;
+:func:`serialsocket._params.negotiate`): the escape code on an 8-bit line,
+radix 91 on a printable one.  Both decode exactly one packet's data field
+(tokens never cross fields; the field's length alone tells where a radix-91
+field's short tail is), accept only the canonical encoding of some byte string
+(every field has one decoding and every byte string one encoding), and raise
 :class:`~serialsocket.MalformedDataError` on anything else.  Both offer the
 interface of :class:`~serialsocket.packets.Encoding` that a sender and a
 receiver use: ``encode``, ``encode_prefix``, ``encode_fields``, ``decode``.

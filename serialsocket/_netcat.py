@@ -40,6 +40,7 @@ import trio
 from ._capture import CaptureFile, CapturingStream
 from ._config import MAX_WINDOW, EndpointConfig
 from ._driver import LinkBroken
+from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._hayes import DialError, ModemConnection, answer, dial
 from ._port import open_port
@@ -53,6 +54,13 @@ _CHUNK = 65536
 """Bytes per stdin read: one read can fill many packets."""
 
 _DEFAULT_BAUD = 9600
+
+_PROFILES: dict[str, Encoding | None] = {
+    "auto": None,
+    "8bit": EIGHT_BIT_CLEAN,
+    "printable": PRINTABLE,
+}
+"""``--profile``: None leaves the choice to the port (``SerialPort.encoding``)."""
 
 
 def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
@@ -93,6 +101,21 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
         type=float,
         default=0.0,
         help="one-way delay of the line in seconds (a hint for the timers; 1.3 for the Moon)",
+    )
+    ap.add_argument(
+        "--profile",
+        choices=sorted(_PROFILES),
+        default="auto",
+        help="what the line carries: 8bit (8N1, 8-bit clean), printable (7 bits, parity, a "
+        "terminal server in between), or auto (default: from the port's format, 8N1 here, "
+        "so 8bit); between two telelink ends a dense encoding of it is negotiated",
+    )
+    ap.add_argument(
+        "--no-dense",
+        dest="dense",
+        action="store_false",
+        help="offer no dense encoding: classic Kermit prefixing, whose run-length "
+        "compression wins on data with long runs of one byte (the dense codes have none)",
     )
     ap.add_argument("--dead-after", type=float, help="declare the link dead after this silence")
     ap.add_argument("--trace", action="store_true", help="log every packet, decoded, to stderr")
@@ -232,6 +255,8 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
     elif args.baud is not None:
         rate = args.baud
     return EndpointConfig(
+        encoding=_PROFILES[args.profile],
+        dense=args.dense,  # a byte stream of any content: dense unless told otherwise
         window=args.window,
         max_packet_length=args.max_len,
         one_way_delay=args.delay,
@@ -255,7 +280,7 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
             modem = await dial(port, args.dial)
         if modem is not None:
             print(f"serialsocket: {modem.result}", file=sys.stderr)
-        cfg = _config(args, modem)
+        cfg = _config(args, modem).for_line(port)  # --profile auto: the port's format
         if tally.capture is not None:
             name = "listen" if listening else "connect"
             interface = tally.capture.add_interface(args.port, description=f"serialsocket {name}")

@@ -27,7 +27,10 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
  20   WHATAMI2   tochar(32)
  21   VERSION    tochar(protocol version)
  22   TIMEOUT    three base-95 chars: the initial timeout hint in milliseconds
- 23   XCAPAS     tochar(extensions offered): 1 = long sequence numbers
+ 23   XCAPAS     tochar(extensions offered): 1 = long sequence numbers,
+                 2 = dense escape code (8-bit line), 4 = dense radix-91
+                 packing (printable line), 8 = CRC-32, 16 = reserved
+                 (expedited lane), 32 = escape XON/XOFF too
  24   XWINDO     three chars, tochar of 6 bits each, most significant first:
                  the window offered with long sequence numbers (with XCAPAS 1)
 ====  =========  ==========================================================
@@ -35,26 +38,39 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
 MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
 through CHECK, so n = length - 7 exactly, with no hidden safety margin.
 
-XCAPAS and XWINDO (PROTOCOL.md section 9) extend protocol version 1
+XCAPAS and XWINDO (PROTOCOL.md sections 9 and 10) extend protocol version 1
 compatibly: an endpoint that stops reading after TIMEOUT sees no extension
-offered, and an extension is used only when both sides offer it.
+offered, and an extension is used only when both sides offer it.  A
+listener's answer carries XCAPAS only when the request did (:meth:`answer`),
+so a peer that sends none gets exactly the classic 26-character answer.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
+from ._dense import XON_XOFF, EscapeEncoding, Radix91Encoding
 from ._encoding import Encoding
 from ._errors import RemoteProtocolError
 from ._wire import MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
 
 __all__ = [
+    "DENSE_FEATURES",
+    "FEATURE_CRC32",
+    "FEATURE_ESCAPE",
+    "FEATURE_EXPEDITED",
+    "FEATURE_RADIX91",
+    "FEATURE_XON_XOFF",
     "LONG_SEQ_MODULUS",
     "MAX_LONG_WINDOW",
     "PROTOCOL_VERSION",
+    "RESIDUAL_ERROR_TARGET",
+    "DataCodec",
     "InitParameters",
     "Negotiated",
+    "crc32_wanted",
     "decode18",
     "encode18",
     "negotiate",
@@ -74,7 +90,58 @@ receiver tells the current window from the previous one (131071 packets)."""
 
 _CAP_MORE, _CAP_LONG, _CAP_WINDOWS = 1, 2, 4
 _XCAP_LONG_SEQ = 1
+
+FEATURE_ESCAPE = 2
+"""XCAPAS bit: I decode the dense escape code (serialsocket/DENSE.md section 1)."""
+FEATURE_RADIX91 = 4
+"""XCAPAS bit: I decode the radix-91 packing (serialsocket/DENSE.md section 2)."""
+FEATURE_CRC32 = 8
+"""XCAPAS bit: I want CRC-32 on every packet after the init exchange (when
+CRC-16 misses the residual-error target, PROTOCOL.md 10.5).  Every endpoint
+that sets any of bits 2, 4, 8 decodes CRC-32, so the wish of either side is
+granted when both set one of them."""
+FEATURE_EXPEDITED = 16
+"""XCAPAS bit reserved for the expedited lane (issue 20): never sent, ignored."""
+FEATURE_XON_XOFF = 32
+"""XCAPAS bit: my line uses software flow control: the escape code must
+escape XON/XOFF (:data:`~serialsocket._dense.XON_XOFF`) too."""
+DENSE_FEATURES = FEATURE_ESCAPE | FEATURE_RADIX91
+"""What a telelink endpoint of this version decodes: offered with
+``EndpointConfig(dense=True)``."""
+_KNOWN_FEATURES = DENSE_FEATURES | FEATURE_CRC32 | FEATURE_XON_XOFF
+
+DataCodec = Encoding | EscapeEncoding | Radix91Encoding
+"""A data-field encoding: ``encode_fields`` on the sending side,
+``decode_fields`` on the receiving side (the same interface on all three)."""
 _SYSID = b"TL"
+
+
+RESIDUAL_ERROR_TARGET = 1e-12
+"""At most one undetected damaged byte per 10^12 delivered (PROTOCOL.md 10.3)."""
+
+DESIGN_BYTE_ERROR_RATE = 1e-5
+"""The byte damage rate the CRC-32 rule assumes when nothing is measured: the
+worst rate at which a 128-character packet still gets through 99.9 % of the
+time (PROTOCOL.md 10.3)."""
+
+CRC16_HD4_LIMIT = 4093
+"""Longest covered length (bytes) for which CRC-16/KERMIT catches every two-bit
+error (Hamming distance 4); beyond it two flips 32 767 bits apart pass."""
+
+
+def crc32_wanted(max_packet_length: int, byte_error_rate: float = DESIGN_BYTE_ERROR_RATE) -> bool:
+    """Whether CRC-16 misses :data:`RESIDUAL_ERROR_TARGET` at this packet length.
+
+    Undetected errors per delivered byte with an ``r``-bit CRC are about
+    ``N q^2 / 2^(r+1)`` for ``N`` wire characters per packet and byte damage
+    rate ``q`` (PROTOCOL.md 10.3), so CRC-16 suffices while
+    ``N q^2 <= 2^17 x target``, and never past its HD-4 length.
+    """
+    n = max_packet_length + 1
+    return (
+        max_packet_length > CRC16_HD4_LIMIT
+        or n * byte_error_rate**2 > 2**17 * RESIDUAL_ERROR_TARGET
+    )
 
 
 def encode18(n: int) -> bytes:
@@ -109,6 +176,10 @@ class InitParameters:
         version: telelink protocol version, or None for a non-telelink peer.
         long_window: the window I offer with long sequence numbers
             (1..:data:`MAX_LONG_WINDOW`), or None: I do not offer them.
+        features: the other XCAPAS bits (:data:`FEATURE_ESCAPE` ...), or
+            None when the init carries no XCAPAS at all (a classic or older
+            peer; then nothing of PROTOCOL.md section 10 is used).  Bits this
+            version does not know are kept as received and never agreed.
     """
 
     max_packet_length: int
@@ -121,6 +192,7 @@ class InitParameters:
     timeout_hint: float | None = None
     version: int | None = PROTOCOL_VERSION
     long_window: int | None = None
+    features: int | None = None
 
     @classmethod
     def mine(
@@ -129,21 +201,61 @@ class InitParameters:
         max_packet_length: int,
         window: int,
         check: BlockCheck,
-        encoding: Encoding,
+        encoding: Encoding | None,
         timeout_hint: float,
         long_window: int | None = None,
+        features: int | None = None,
     ) -> InitParameters:
-        """The parameters an endpoint with this configuration offers."""
+        """The parameters an endpoint with this configuration offers.
+
+        ``features`` are the XCAPAS bits offered besides long sequence
+        numbers (None, the default: no XCAPAS, the classic init;
+        ``EndpointConfig.init_features()`` gives an endpoint's).  An
+        ``encoding`` of None (left to the line) offers the printable profile.  CRC-32 is added when
+        ``check`` is :data:`BlockCheck.CRC32` or :func:`crc32_wanted` says the
+        packet length needs it; the classic fields then still ask for CRC-16
+        (CHKT ``5``), which is what a peer that does not agree uses.
+        """
+        if encoding is None:
+            encoding = Encoding()  # left to a line nobody looked at: printable
+        if features is not None and (check is BlockCheck.CRC32 or crc32_wanted(max_packet_length)):
+            features |= FEATURE_CRC32
         return cls(
             max_packet_length=max_packet_length,
             window=window,
-            check=check,
-            force_check=check is BlockCheck.CRC16,
+            check=BlockCheck.CRC16 if check is BlockCheck.CRC32 else check,
+            force_check=check in (BlockCheck.CRC16, BlockCheck.CRC32),
             qbin=encoding.qbin if encoding.qbin is not None else ord("Y"),
             rept=encoding.rept,
             qctl=encoding.qctl,
             timeout_hint=timeout_hint,
             long_window=long_window,
+            features=features,
+        )
+
+    def answer(self, theirs: InitParameters, long_window: int | None) -> InitParameters:
+        """What a listener with these parameters answers to ``theirs``.
+
+        XCAPAS is echoed only if the request carried one (a peer that sends
+        none gets the classic answer) and this side offers features at all
+        (``features`` not None), with the features both sides know --
+        so the answer never claims an encoding the requester did not offer --
+        plus CRC-32 when either side asks for it.  Long sequence numbers:
+        ``long_window`` when the requester offered them.
+        """
+        features = None
+        if theirs.features is not None and self.features is not None:
+            # Encodings: what both decode.  CRC-32 and XON/XOFF: wishes and
+            # declarations, mine and (CRC-32) the requester's echoed.
+            features = (
+                (self.features & theirs.features & DENSE_FEATURES)
+                | ((self.features | theirs.features) & FEATURE_CRC32)
+                | (self.features & FEATURE_XON_XOFF)
+            )
+        return dataclasses.replace(
+            self,
+            features=features,
+            long_window=long_window if theirs.long_window is not None else None,
         )
 
     def encode(self) -> bytes:
@@ -175,8 +287,14 @@ class InitParameters:
             tochar(ms // 95 % 95),
             tochar(ms % 95),
         ]
-        if self.long_window is not None:  # without an offer the init stays 26 characters
-            fields += [tochar(_XCAP_LONG_SEQ), *encode18(self.long_window)]
+        # Without an offer the init stays 26 characters (the classic init).
+        if self.long_window is not None or self.features is not None:
+            xcaps = (self.features or 0) & ~_XCAP_LONG_SEQ
+            if self.long_window is not None:
+                xcaps |= _XCAP_LONG_SEQ
+            fields.append(tochar(xcaps))
+            if self.long_window is not None:
+                fields += encode18(self.long_window)
         return bytes(fields)
 
     @classmethod
@@ -234,6 +352,7 @@ class InitParameters:
         version = None
         timeout_hint = None
         long_window = None
+        features = None
         if j < len(data):
             sysid_len = unchar(data[j])
             sysid = data[j + 1 : j + 1 + sysid_len]
@@ -248,6 +367,7 @@ class InitParameters:
                     xcaps = unchar(data[k + 4])
                     if not 0 <= xcaps <= 94:
                         raise bad("XCAPAS")
+                    features = xcaps & ~_XCAP_LONG_SEQ
                     if xcaps & _XCAP_LONG_SEQ:
                         long_window = decode18(data[k + 5 : k + 8])
                         if long_window is None or not 1 <= long_window <= MAX_LONG_WINDOW:
@@ -263,6 +383,7 @@ class InitParameters:
             timeout_hint=timeout_hint,
             version=version,
             long_window=long_window,
+            features=features,
         )
 
 
@@ -275,8 +396,10 @@ class Negotiated:
         receive_max_length: largest packet we accept (ours).
         window: the smaller of the two offers (of the long windows when
             both offer long sequence numbers).
-        check: block check on every packet after the exchange.
-        encoding: the prefix profile both directions use.
+        check: block check on every packet after the exchange
+            (:data:`BlockCheck.CRC32` when both agreed on it).
+        encoding: the data-field encoding both directions use: a Kermit
+            prefix profile, or a dense one (PROTOCOL.md section 10).
         peer: the peer's parameters as received.
         long_seq: both offered long sequence numbers: they are mod
             :data:`LONG_SEQ_MODULUS` on the wire (PROTOCOL.md section 9).
@@ -286,7 +409,7 @@ class Negotiated:
     receive_max_length: int
     window: int
     check: BlockCheck
-    encoding: Encoding
+    encoding: DataCodec
     peer: InitParameters
     long_seq: bool = False
 
@@ -334,7 +457,24 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
             "the two sides use different control prefixes",
             error_hint="Control prefix mismatch",
         )
-    encoding = Encoding(qctl=mine.qctl, qbin=qbin, rept=rept)
+    common = (mine.features or 0) & (theirs.features or 0)
+    declared = (mine.features or 0) | (theirs.features or 0)
+    encoding: DataCodec
+    if qbin is None and common & FEATURE_ESCAPE:
+        encoding = EscapeEncoding(unsafe=XON_XOFF if declared & FEATURE_XON_XOFF else b"")
+    elif qbin is not None and common & FEATURE_RADIX91:
+        encoding = Radix91Encoding()
+    else:
+        encoding = Encoding(qctl=mine.qctl, qbin=qbin, rept=rept)
+    # Every endpoint that sets any of bits 2, 4, 8 decodes CRC-32; bit 8 is
+    # a wish, granted when either side makes it (PROTOCOL.md 10.2).
+    speaks = FEATURE_CRC32 | DENSE_FEATURES
+    if (
+        (mine.features or 0) & speaks
+        and (theirs.features or 0) & speaks
+        and declared & FEATURE_CRC32
+    ):
+        check = BlockCheck.CRC32
     long_seq = mine.long_window is not None and theirs.long_window is not None
     if mine.long_window is not None and theirs.long_window is not None:
         window = min(mine.long_window, theirs.long_window)

@@ -39,8 +39,15 @@ from typing import Any, Protocol
 
 import trio
 
+from ._encoding import Encoding
 from ._pyserial import THREAD_READ_TIMEOUT as _THREAD_READ_TIMEOUT
-from ._pyserial import PortStatistics, check_line_settings, open_serial, read_blocks_for_one_byte
+from ._pyserial import (
+    PortStatistics,
+    check_line_settings,
+    open_serial,
+    port_encoding,
+    read_blocks_for_one_byte,
+)
 
 __all__ = ["PortStatistics", "SerialPort", "open_port", "open_pty_pair", "port_statistics"]
 
@@ -85,6 +92,14 @@ class SerialPort(trio.abc.Stream):
         # transport would otherwise interleave two writers' chunks).
         self._sending = self._receiving = False
         self._bytes_in = self._bytes_out = self._reads = self._writes = self._errors = 0
+
+    @property
+    def encoding(self) -> Encoding:
+        """The prefix profile this line carries (its character format: 8N1,
+        a raw pty or a URL is 8-bit clean; 7 data bits or parity printable).
+        ``connect``/``accept``/``listen`` use it when the configuration
+        leaves ``encoding`` to the line (PROTOCOL.md section 8)."""
+        return port_encoding(self.serial)
 
     def statistics(self) -> PortStatistics:
         """A snapshot of the counters."""
@@ -353,11 +368,13 @@ async def open_port(
         baud: line rate in bit/s, > 0 (ignored by ptys and sockets, which are
             as fast as the machine).
         bytesize, parity, stopbits: the character format, 8N1 by default.
-            A 7-bit line (``bytesize=7, parity="E"``: 7E1, classic Kermit
-            territory) carries the printable profile unchanged.
+            It chooses the profile (``port.encoding``): 8N1 is 8-bit clean;
+            a 7-bit line (``bytesize=7, parity="E"``: 7E1, classic Kermit
+            territory) or any parity carries the printable profile.
         xonxoff: software flow control (off by default: the printable Kermit
             profile never sends XON/XOFF, but binary data over an 8-bit-clean
-            profile would trip it).
+            profile would trip it; with it on, tell the endpoint
+            ``EndpointConfig(xon_xoff=True)`` so the escape code escapes them).
         rtscts: hardware flow control.
         exclusive: take an advisory lock so a second program cannot open it.
 

@@ -20,12 +20,16 @@ from typing import Any
 
 import serial
 
+from ._config import line_encoding
+from ._encoding import EIGHT_BIT_CLEAN, Encoding
+
 __all__ = [
     "THREAD_READ_TIMEOUT",
     "THREAD_WRITE_TIMEOUT",
     "PortStatistics",
     "check_line_settings",
     "open_serial",
+    "port_encoding",
     "read_blocks_for_one_byte",
 ]
 
@@ -188,3 +192,12 @@ def read_blocks_for_one_byte(fd: int) -> None:
         cc[termios.VMIN] = 1
         cc[termios.VTIME] = 0
         termios.tcsetattr(fd, termios.TCSANOW, attrs)
+
+
+def port_encoding(serial_obj: Any) -> Encoding:
+    """The prefix profile a port carries, from its character format
+    (:func:`~serialsocket._config.line_encoding`: 8N1 is 8-bit clean, 7 data
+    bits or parity printable).  A raw pty (no pyserial object) is 8-bit clean."""
+    if serial_obj is None:
+        return EIGHT_BIT_CLEAN
+    return line_encoding(getattr(serial_obj, "bytesize", 8), getattr(serial_obj, "parity", "N"))

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ._encoding import Encoding
+from ._params import DataCodec  # the negotiated codec may be a dense one
 
 __all__ = ["Arrival", "Receiver"]
 
@@ -135,7 +135,7 @@ class Receiver:
             self.buffered_bytes -= len(item)
             arrival.fields.append(item)
 
-    def take_fields(self, arrival: Arrival, encoding: Encoding) -> int:
+    def take_fields(self, arrival: Arrival, encoding: DataCodec) -> int:
         """Decode what an arrival delivered and make it readable.
 
         Raises:
@@ -143,7 +143,8 @@ class Receiver:
         """
         if not arrival.fields:
             return 0
-        data = encoding.decode(b"".join(arrival.fields))
+        # decode_fields, not decode(join): radix-91 fields end in their own tails.
+        data = encoding.decode_fields(arrival.fields)
         arrival.fields.clear()
         if self.discard:
             self.discarded_total += len(data)

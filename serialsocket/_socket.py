@@ -371,7 +371,7 @@ async def connect(
         TimeoutError: no answer within the connect timeout.
         trio.BrokenResourceError: the port failed while connecting.
     """
-    cfg = config or EndpointConfig()
+    cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
     driver = await _start_driver(port, cfg, nursery)
     driver.ep.connect(driver.now())
     driver.notify()
@@ -405,7 +405,7 @@ async def accept(
     Raises:
         trio.BrokenResourceError: the port failed while listening.
     """
-    cfg = config or EndpointConfig()
+    cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
     driver = await _start_driver(port, cfg, nursery)
     driver.ep.listen()
     try:
@@ -446,7 +446,7 @@ async def listen(
     port: trio.abc.Stream, config: EndpointConfig | None = None
 ) -> AsyncIterator[SerialListener]:
     """``async with listen(port) as listener: sock = await listener.accept()``."""
-    cfg = config or EndpointConfig()
+    cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
     driver = _Driver(port, Endpoint(cfg), owns_port=False)
     async with trio.open_nursery() as nursery:
         await nursery.start(driver.run)

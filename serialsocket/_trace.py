@@ -20,8 +20,9 @@ import logging
 import trio
 
 from ._checks import BlockCheck
-from ._encoding import Encoding
-from ._errors import MalformedDataError
+from ._encoding import PRINTABLE, Encoding
+from ._errors import MalformedDataError, RemoteProtocolError
+from ._params import DataCodec, InitParameters, negotiate
 from ._parser import PacketParser, PacketReceived
 from ._port import PortStatistics, port_statistics
 from ._wire import MAX_PACKET_LENGTH, PacketType
@@ -30,18 +31,41 @@ __all__ = ["TracingStream"]
 
 log = logging.getLogger("serialsocket.trace")
 
+_INIT_ANSWER = 12
+"""An ACK with at least this many data characters answers an init (PROTOCOL.md 9)."""
+
 _PREVIEW = 48
 """Decoded bytes shown per data packet: enough to recognise a command line."""
 
 
 class _Direction:
-    def __init__(self, name: str, encoding: Encoding) -> None:
+    def __init__(self, name: str, encoding: DataCodec) -> None:
         self.name = name
         self.encoding = encoding
+        self.head = 0
+        self.init: InitParameters | None = None
+        self.other: _Direction | None = None
         # The largest packet anyone may negotiate: the trace must see them all.
         self.parser = PacketParser(
             max_length=MAX_PACKET_LENGTH, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
         )
+
+    def _on_init(self, data: bytes) -> None:
+        """Follow the init exchange: once both directions carried one, decode
+        what comes after with the agreed encoding and check (dense encodings
+        and CRC-32 included, PROTOCOL.md section 10)."""
+        try:
+            self.init = InitParameters.decode(data)
+            other = self.other
+            if other is None or other.init is None:
+                return
+            agreed = negotiate(self.init, other.init)
+        except RemoteProtocolError:
+            return
+        for d in (self, other):
+            d.encoding = agreed.encoding
+            d.parser.check = agreed.check
+            d.head = 2 if agreed.long_seq else 0
 
     def feed(self, data: bytes | bytearray | memoryview) -> None:
         self.parser.receive_data(bytes(data))
@@ -49,9 +73,14 @@ class _Direction:
             if isinstance(event, PacketReceived):
                 pkt = event.packet
                 head = f"{self.name} {pkt.type} seq={pkt.seq} len={event.length}"
+                if pkt.seq == 0 and (
+                    pkt.type == PacketType.INIT
+                    or (pkt.type == PacketType.ACK and len(pkt.data) >= _INIT_ANSWER)
+                ):
+                    self._on_init(pkt.data)
                 if pkt.type == PacketType.DATA:
                     try:
-                        payload = self.encoding.decode(pkt.data)
+                        payload = self.encoding.decode(pkt.data[self.head :])
                     except MalformedDataError as exc:
                         log.debug("%s undecodable field %r: %s", head, pkt.data[:_PREVIEW], exc)
                         continue
@@ -72,13 +101,16 @@ class TracingStream(trio.abc.Stream):
     """A transparent wrapper around ``inner`` that logs the packets passing through.
 
     Closing it closes ``inner``.  ``encoding`` decodes data fields for display
-    (the profile the endpoints use; PRINTABLE by default).
+    until the init exchange has been seen both ways; from then on the agreed
+    encoding and block check do (PRINTABLE by default).
     """
 
-    def __init__(self, inner: trio.abc.Stream, encoding: Encoding) -> None:
+    def __init__(self, inner: trio.abc.Stream, encoding: Encoding | None = None) -> None:
         self.inner = inner
-        self._tx = _Direction("tx", encoding)
-        self._rx = _Direction("rx", encoding)
+        start = encoding or PRINTABLE
+        self._tx = _Direction("tx", start)
+        self._rx = _Direction("rx", start)
+        self._tx.other, self._rx.other = self._rx, self._tx
 
     async def send_all(self, data: bytes | bytearray | memoryview) -> None:
         await self.inner.send_all(data)

@@ -488,8 +488,8 @@ async def connect(
         ConnectionError: the port failed while connecting.
         OSError: a path or URL could not be opened.
     """
-    cfg = config or EndpointConfig()
     line, _ = await _port(port, baud)
+    cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=True)
     try:
         d.start()
@@ -528,8 +528,8 @@ async def accept(
     Raises:
         ConnectionError: the port failed while listening.
     """
-    cfg = config or EndpointConfig()
     line, _ = await _port(port, baud)
+    cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=True)
     try:
         d.start()
@@ -566,8 +566,8 @@ async def listen(
 
     The listener's port is closed when the block ends.
     """
-    cfg = config or EndpointConfig()
     line, _ = await _port(port, baud)
+    cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=False)
     d.start()
     d.ep.listen()

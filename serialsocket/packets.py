@@ -10,14 +10,15 @@ between data and packet sizes.  Lengths count MARK through CHECK:
 
 Block checks: :class:`BlockCheck` (types 1, 2 and 3), :func:`check_chars`,
 :func:`crc16_kermit` (CRC-16/KERMIT); :func:`crc32_ieee` and
-:func:`crc32_chars` (CRC-32, not negotiated yet).  Prefix encoding:
+:func:`crc32_chars` (CRC-32, ``BlockCheck.CRC32`` when two telelink ends agree).  Prefix encoding:
 :class:`Encoding`, with the profiles :data:`PRINTABLE` (the default: printable
 output) and :data:`EIGHT_BIT_CLEAN` (no 8th-bit prefixing).
 
-Dense encodings for telelink-to-telelink links (serialsocket/DENSE.md; not
-negotiated yet): :class:`EscapeEncoding` (8-bit lines: escape only MARK, the
-escape byte and declared unsafe bytes such as :data:`XON_XOFF`) and
-:class:`Radix91Encoding` (printable lines: 16 characters per 13 bytes).
+Dense encodings for telelink-to-telelink links (negotiated in the init
+exchange, serialsocket/PROTOCOL.md section 10; design notes in DENSE.md):
+:class:`EscapeEncoding` (8-bit lines: escape only MARK, the escape byte and
+declared unsafe bytes such as :data:`XON_XOFF`) and :class:`Radix91Encoding`
+(printable lines: 16 characters per 13 bytes).
 
 Parsing: :class:`PacketParser` takes any bytes, line noise included, and
 yields :data:`ParserEvent` s, :class:`PacketReceived` or

@@ -17,7 +17,8 @@ import trio.testing
 
 from linksim import DirectionConfig, LinkConfig, endpoint_config_for
 from linksim.link import ImpairedLink
-from serialsocket import EndpointConfig, accept, connect
+from serialsocket import accept, connect
+from serialsocket._params import negotiate
 from serialsocket.capture import (
     LINKTYPE_SERIAL,
     LINKTYPE_TCPSTREAM,
@@ -228,19 +229,23 @@ def _packets(packets: tuple[CapturedPacket, ...], direction: Direction) -> list[
 def _payload(packets: tuple[CapturedPacket, ...], direction: Direction) -> bytes:
     """The data bytes carried one way, decoded from the captured Kermit packets.
 
-    When both inits offer long sequence numbers (``long_window``), each data
-    field starts with the two characters of the high bits: skipped.
+    The encoding is the one the two captured inits negotiate; when both offer
+    long sequence numbers, each data field starts with the two characters of
+    the high bits: skipped.
     """
-    offers = [
-        getattr(InitParameters.decode(p.data), "long_window", None) is not None
+    inits = [
+        InitParameters.decode(p.data)
         for way in (Direction.OUTBOUND, Direction.INBOUND)
         for p in _packets(packets, way)
         if p.seq == 0 and (p.type == "I" or (p.type == "Y" and len(p.data) >= 12))
     ]
-    head = 2 if len(offers) == 2 and all(offers) else 0
-    encoding = EndpointConfig().encoding
+    assert len(inits) == 2
+    # The data encoding both inits agreed on (a dense one between two telelink
+    # ends, serialsocket/PROTOCOL.md section 10).
+    agreed = negotiate(*inits)
+    head = 2 if agreed.long_seq else 0
     return b"".join(
-        encoding.decode(p.data[head:]) for p in _packets(packets, direction) if p.type == "D"
+        agreed.encoding.decode(p.data[head:]) for p in _packets(packets, direction) if p.type == "D"
     )
 
 

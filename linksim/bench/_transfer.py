@@ -12,9 +12,12 @@ The theoretical limit (the ARQ issue's definition)::
     limit_Bps = line_Bps x carried / wire x (1 - P(packet hit))
 
 ``carried / wire`` is measured on the very payload of the point: the payload
-is cut into data fields exactly as the sender cuts it (same encoding profile,
-same maximum packet length), every full packet is framed with its CRC and EOL,
-and the bytes it carries are divided by the bytes it occupies on the line.
+is cut into data fields exactly as the sender cuts it (the data encoding and
+block check two endpoints of this profile and maximum packet length agree on
+in their init exchange -- the radix-91 packing or the escape code between two
+telelink ends, serialsocket/PROTOCOL.md section 10 -- and the same maximum
+packet length), every full packet is framed with its check and EOL, and the
+bytes it carries are divided by the bytes it occupies on the line.
 ``P(packet hit)`` is the probability that at least one of the ``wire`` bytes
 of such a packet is damaged: ``1 - (1 - byte_error_rate)^wire`` for
 independent errors, the exact Gilbert-Elliott block probability otherwise.
@@ -25,6 +28,7 @@ timers, pacing, recovery) loses.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -35,8 +39,8 @@ from serialsocket import ConnectionAborted, Endpoint, EndpointConfig, LinkDead, 
 from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
-    BlockCheck,
     Encoding,
+    Negotiated,
     Packet,
     build_packet,
     data_capacity,
@@ -47,6 +51,7 @@ __all__ = [
     "HINTS",
     "PROFILES",
     "Measurement",
+    "agreed_parameters",
     "hinted",
     "limit_goodput",
     "packet_error_probability",
@@ -111,18 +116,43 @@ class Measurement:
     long_sequence: bool = False
 
 
+@functools.lru_cache(maxsize=64)
+def agreed_parameters(encoding: Encoding, max_len: int) -> Negotiated:
+    """What two endpoints configured with this profile and maximum packet
+    length agree on, from a real init exchange between two
+    :class:`~serialsocket.Endpoint` objects (so the limit follows the
+    negotiation, dense encodings and CRC-32 included)."""
+    cfg = EndpointConfig(max_packet_length=max_len, encoding=encoding)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    b.listen()
+    a.connect(0.0)
+    b.receive_data(a.data_to_send(0.0), 0.0)
+    a.receive_data(b.data_to_send(0.0), 0.0)
+    assert a.parameters is not None, "two default endpoints always agree"
+    return a.parameters
+
+
 def packet_sizes(payload: bytes, encoding: Encoding, max_len: int) -> tuple[float, float]:
     """Mean payload bytes carried and wire bytes occupied by a full data packet.
 
-    The payload is cut exactly as the sender cuts it; the last (possibly
-    short) packet is left out unless it is the only one.  Wire bytes count
-    MARK through CHECK plus the EOL (CR), i.e. everything the UART clocks out.
+    ``encoding`` is the endpoints' configured profile; the payload is cut
+    exactly as the sender cuts it with the data encoding and check the two
+    ends agree on (:func:`agreed_parameters`); the last (possibly short)
+    packet is left out unless it is the only one.  Wire bytes count MARK
+    through CHECK plus the EOL (CR), i.e. everything the UART clocks out.
     """
-    cap = data_capacity(max_len, BlockCheck.CRC16)
-    fields = encoding.encode_fields(payload, cap, 1 << 30)
+    agreed = agreed_parameters(encoding, max_len)
+    cap = data_capacity(max_len, agreed.check)
+    if agreed.long_seq:
+        cap -= 2  # the high sequence bits head every data field (PROTOCOL.md 9)
+    fields = agreed.encoding.encode_fields(payload, cap, 1 << 30)
     full = fields[:-1] or fields
     carried = sum(used for _, used in full)
-    wire = sum(len(build_packet(Packet(seq=0, type="D", data=f))) for f, _ in full)
+    wire = sum(
+        len(build_packet(Packet(seq=0, type="D", data=f), agreed.check))
+        + (2 if agreed.long_seq else 0)
+        for f, _ in full
+    )
     return carried / len(full), wire / len(full)
 
 

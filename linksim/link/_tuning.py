@@ -18,6 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 from serialsocket import EndpointConfig
+from serialsocket.packets import EIGHT_BIT_CLEAN
 from tcpstream import ServerConfig
 from tcpstream.commands import PACKET_SIZE
 
@@ -43,6 +44,9 @@ def endpoint_config_for(link: LinkConfig, **overrides: Any) -> EndpointConfig:
     as the command session's telemetry sees the line is busy.
     """
     d = link.a_to_b
+    # The simulated line carries every byte value (8N1): the 8-bit profile,
+    # as a real 8N1 port would choose (PROTOCOL.md section 8).
+    overrides.setdefault("encoding", EIGHT_BIT_CLEAN)
     return EndpointConfig(
         one_way_delay=d.delay + d.jitter,
         line_rate=d.rate,

@@ -176,7 +176,8 @@ def test_data_packets_carry_the_high_bits_before_the_data() -> None:
     assert event.packet.type == PacketType.DATA
     packet = event.packet
     assert decode18(packet.data[:2] + bytes((packet.seq + 32,))) == 4094
-    assert packet.data[2:] == b"hello"
+    assert a.parameters is not None
+    assert a.parameters.encoding.decode(packet.data[2:]) == b"hello"  # the agreed encoding
 
 
 def test_transfers_across_the_wrap_of_the_18_bit_space_both_ways() -> None:
