@@ -6,7 +6,8 @@
 * :func:`preview` plays commands on a local copy of the arm
   (:class:`PreviewReport`); :class:`Predictor` keeps the predicted state
   ahead of the confirmed one and records :class:`Divergence`;
-  :class:`ConsoleSession` / :class:`ConsoleSnapshot` draw it.
+  :class:`ConsoleSession` / :class:`ConsoleSnapshot` draw it
+  (:func:`render_plain`: a snapshot as plain text lines).
 * Your own commands: :func:`parse_command` reads the operator's command
   language (``move_joint 1 20deg``; :class:`CommandSyntaxError`),
   :func:`resolve_task` / :func:`load_task` a task file (:class:`TaskFile`,
@@ -21,7 +22,7 @@
 from __future__ import annotations
 
 from ._command_line import CommandStack
-from ._console import ConsoleSession, ConsoleSnapshot
+from ._console import ConsoleSession, ConsoleSnapshot, render_plain
 from ._control import CommandRecord, CommandState, TaskRun, feedback_record
 from ._interactive import LineSource, TerminalLines, run_command_line, script_lines
 from ._plot import plot_log
@@ -59,6 +60,7 @@ __all__ = [
     "plot_log",
     "preview",
     "read_log",
+    "render_plain",
     "resolve_task",
     "run_command_line",
     "script_lines",

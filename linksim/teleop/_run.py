@@ -23,8 +23,7 @@ import numpy as np
 import trio
 
 from linksim.arm import DEFAULT_WORLD, PUMA560, hand_frame
-from linksim.control import ConsoleSession
-from linksim.control._console import render_plain
+from linksim.control import ConsoleSession, render_plain
 from linksim.link import (
     LinkConfig,
     rtt_hint_for,
