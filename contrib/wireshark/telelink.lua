@@ -223,10 +223,23 @@ local function prefix_byte(pref)
     return string.byte(pref)
 end
 
+-- The 8th-bit prefix two QBIN fields agree on (Kermit protocol manual): a
+-- prefix character (33-62, 96-126) that the other side repeats or answers
+-- 'Y' to; false for none (both 'Y', an 'N', or two different characters).
+local function agree_qbin(a, b)
+    local function is_prefix(c) return c and ((c >= 33 and c <= 62) or (c >= 96 and c <= 126)) end
+    if is_prefix(a) and (b == a or b == 89) then return a end
+    if is_prefix(b) and a == 89 then return b end
+    return false
+end
+
 -- Undo Kermit prefix encoding: [REPT count] [QBIN] [QCTL] char.
-local function kermit_decode(bytes, first, last)
+local function kermit_decode(bytes, first, last, agreed_qbin)
     local qctl, qbin, rept = prefix_byte(tl.prefs.qctl), prefix_byte(tl.prefs.qbin),
         prefix_byte(tl.prefs.rept)
+    -- What the init exchange agreed (false: no 8th-bit prefixing, an 8-bit
+    -- line), when the capture holds it; else the preference.
+    if agreed_qbin ~= nil then qbin = agreed_qbin or nil end
     local out, i = {}, first
     while i <= last do
         local count = 1
@@ -322,11 +335,12 @@ end
 -- Long sequence numbers (18 bits), per interface: offered in the I, agreed
 -- when the init's answer offers them too.  First pass: `active` follows the
 -- capture; `at` remembers, per packet, what was in force for later passes.
-local longseq = { offer = {}, active = {}, at = {} }
+local longseq = { offer = {}, active = {}, at = {}, qbin_offer = {}, qbin = {}, qbin_at = {} }
 local LONG_MODULUS = 64 * 64 * 64
 
 function longseq.reset()
     longseq.offer, longseq.active, longseq.at = {}, {}, {}
+    longseq.qbin_offer, longseq.qbin, longseq.qbin_at = {}, {}, {}
 end
 
 local function add_init(tree, buf, dstart, dlen, bytes)
@@ -463,13 +477,23 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
         t:add(f.data, buf:range(dstart, dlen))
         t:add(f.data_len, buf:range(dstart, dlen), dlen)
     end
+    local qbin
+    if pinfo.visited then
+        qbin = longseq.qbin_at[where]
+    else
+        qbin = longseq.qbin[iface]
+        longseq.qbin_at[where] = qbin
+    end
     if init then
         local offered = add_init(t, buf, dstart, dlen, bytes)
         if good and not pinfo.visited then
+            local q = dlen >= 7 and bytes[dstart + 7] or nil
             if type_char == "I" then
                 longseq.offer[iface], longseq.active[iface] = offered, false
+                longseq.qbin_offer[iface], longseq.qbin[iface] = q, nil
             elseif type_char == "Y" then
                 longseq.active[iface] = (longseq.offer[iface] or false) and offered
+                longseq.qbin[iface] = agree_qbin(longseq.qbin_offer[iface], q)
             end
         end
     elseif is_ack then
@@ -479,7 +503,7 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
         t:add(f.ack_poll, buf:range(dstart, dlen), dlen == 2 * width + 1 and bytes[dstart + dlen] == 80)
     elseif dlen > 0 and (type_char == "D" or type_char == "E" or type_char == "F"
         or type_char == "X") then
-        local decoded = kermit_decode(bytes, dstart + 1, dstart + dlen)
+        local decoded = kermit_decode(bytes, dstart + 1, dstart + dlen, qbin)
         if decoded ~= nil then
             local dtvb = ByteArray.new(decoded, true):tvb("Decoded DATA")
             t:add(f.decoded, dtvb:range(0, #decoded))
@@ -522,7 +546,7 @@ function tl.dissector(tvb, pinfo, tree)
     local root = tree:add(tl, buf:range(0, n))
     if carried > 0 then root:add(f.carried, buf:range(0, carried), carried) end
     local bytes = {}
-    local raw = buf:range(0, n):string()
+    local raw = buf:range(0, n):raw() -- raw(): string() maps bytes >= 0x80 to U+FFFD
     for i = 1, n do bytes[i] = raw:byte(i) end -- 1-based copy; buf offsets are 0-based
     local summary = {}
     local pos = 0 -- 0-based offset into buf
