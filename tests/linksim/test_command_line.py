@@ -10,6 +10,7 @@ import os
 import pty
 import re
 import select
+import signal
 import sys
 import time
 
@@ -356,6 +357,9 @@ def test_at_a_terminal_tab_completes_and_ctrl_c_exits_130() -> None:
     argv = [sys.executable, "-m", "linksim", "console", "--virtual", "--preset", "clean", "-i"]
     pid, fd = pty.fork()
     if pid == 0:  # pragma: no cover -- the child
+        # A test run started in the background inherits SIGINT ignored (a
+        # shell does that for background jobs); a user's terminal does not.
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
         os.execv(sys.executable, argv)
     try:
         assert "telelink> " in _read_until(fd, "telelink> ")

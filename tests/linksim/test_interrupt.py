@@ -26,6 +26,9 @@ def test_sigint_midway_exits_130_with_one_line(argv: list[str]) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # A test run started in the background inherits SIGINT ignored (a
+        # shell does that for background jobs); a user's terminal does not.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     assert proc.stderr is not None
     # Wait until the run is under way (a command was sent), then interrupt.
