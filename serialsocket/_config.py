@@ -127,14 +127,26 @@ class EndpointConfig:
             numbers are offered) and answers a request classically.
         xon_xoff: the line uses software flow control: the escape code must
             escape XON/XOFF as well (declared in XCAPAS, bit 32).
-        one_way_delay: a hint: the link's one-way propagation delay in
-            seconds (1.3 for the Earth-Moon path), 0 when unknown.  Sets the
-            first timeout and the floor under every later one; the round
-            trip itself is measured (init exchange, then every ACK of a
-            packet sent once) and the timers follow the measurement.
-        line_rate: a hint: line rate in bits/s, or None when unknown or fast
-            (a TCP tunnel, a local pty).  Sets serialisation time, pacing and
-            the bandwidth-delay bound on the window.
+        one_way_delay: a hint, where estimation starts: the link's one-way
+            propagation delay in seconds (1.3 for the Earth-Moon path), 0
+            when unknown.  Sets the first timeout.  Measured: the round trip
+            (init exchange, then every ACK of a packet sent once) and the
+            path's base round trip without queueing; once the base is
+            measured the timers, the NAK horizon and the buffer sizing use
+            the smaller of the hint and the measured one-way delay (a hint
+            10 times too long is corrected; a short one stays, and the
+            retransmission timer follows the measured round trip either
+            way).  Statistics: ``smoothed_rtt``, ``rtt_variation``,
+            ``base_rtt``.
+        line_rate: a hint, where estimation starts: line rate in bits/s, or
+            None when unknown or fast (a TCP tunnel, a local pty).  Measured:
+            the delivery rate from the ACK clock and the queue in front of
+            the line (serialsocket/_rate.py); pacing, serialisation times,
+            the bandwidth-delay bound on the window and the timers follow
+            the estimate, which a wrong hint (10 times high or low) does not
+            hold back.  Without a hint an endpoint stays unpaced until a
+            queue shows that pacing is needed.  Statistics: ``line_rate``
+            (the estimate in use), ``measured_rate``, ``queue_delay``.
         bits_per_char: bits per character on the line (8N1 = 10).
         long_window: the window offered with long sequence numbers
             (PROTOCOL.md section 9), 1..131071; a telelink peer that offers

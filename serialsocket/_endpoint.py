@@ -30,15 +30,14 @@ even one whose first resend is lost too, never stalls the window (see
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from collections import deque
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
-from ._config import MAX_WINDOW, UNMEASURED_DEAD_AFTER, EndpointConfig
-from ._encoding import PRINTABLE, Encoding
+from ._config import _ACK_WIRE, MAX_WINDOW, UNMEASURED_DEAD_AFTER, EndpointConfig
+from ._encoding import PRINTABLE
 from ._errors import LocalProtocolError, RemoteProtocolError
 from ._events import (
     Connected,
@@ -51,8 +50,17 @@ from ._events import (
 )
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
-from ._params import LONG_SEQ_MODULUS, InitParameters, Negotiated, decode18, encode18, negotiate
+from ._params import (
+    LONG_SEQ_MODULUS,
+    DataCodec,
+    InitParameters,
+    Negotiated,
+    decode18,
+    encode18,
+    negotiate,
+)
 from ._parser import PacketParser, PacketReceived, RejectReason
+from ._rate import RateEstimator, RateMark
 from ._receiver import Receiver
 from ._rtt import RttEstimator
 from ._sender import Outstanding, Sender
@@ -156,6 +164,19 @@ class EndpointStatistics:
     buffer_capped: bool = False
     """The bandwidth-delay product asked for more receive buffer than
     ``buffer_cap``: the cap, not the line, may limit speed."""
+    rtt_variation: float = 0.0
+    """The round trip's smoothed variation (RFC 6298's RTTVAR), s."""
+    base_rtt: float | None = None
+    """The least plausible round trip measured: the path without queueing, s."""
+    line_rate: float | None = None
+    """The line rate the endpoint paces and times by, bits/s: the hint until
+    the ACK clock measures the line, then the measurement (None: unknown,
+    unpaced)."""
+    measured_rate: float | None = None
+    """The largest recent delivery-rate sample from the ACK clock, bits/s."""
+    queue_delay: float = 0.0
+    """Seconds the latest acknowledged packet waited in a queue outside the
+    endpoint (a tty buffer, a relay): 0 when pacing keeps the path empty."""
 
 
 class Endpoint:
@@ -177,7 +198,7 @@ class Endpoint:
     _control: list[bytes]
     _events: deque[Event]
     _send_check: BlockCheck
-    _encoding: Encoding
+    _encoding: DataCodec  # a prefix profile or a dense codec
     _capacity: int
     _clock: float
     _last_heard: float
@@ -201,6 +222,8 @@ class Endpoint:
     _window_cached: int
     _long_seq: bool
     _buffer_capped: bool
+    _tune_at: float
+    _tune_taken: int
     _answer_with: InitParameters | None
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
@@ -214,12 +237,14 @@ class Endpoint:
             encoding=cfg.encoding,
             timeout_hint=cfg.initial_timeout(),
             long_window=self._long_offer() if cfg.needs_long_window() else None,
+            features=cfg.init_features(),  # XCAPAS offers (PROTOCOL.md 10)
         )
         self._parser = PacketParser(
             max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
         )
+        self._rate = RateEstimator(self._rate_hint())
         self._pacer = Pacer(
-            cfg.transmit_time, paced=cfg.line_rate is not None, full_packet=self._max_length + 1
+            self._tx, paced=cfg.line_rate is not None, full_packet=self._max_length + 1
         )
         self._rtt = RttEstimator(
             floor=self._timeout_floor(self._max_length, self._max_length),
@@ -535,6 +560,11 @@ class Endpoint:
             smoothed_rtt=self._rtt.srtt,
             timeout=self._rtt.timeout(),
             line_backlog=self._pacer.backlog(self._clock),
+            rtt_variation=self._rtt.rttvar,
+            base_rtt=self._rate.base_rtt,
+            line_rate=self._bits(self._rate.rate),
+            measured_rate=self._bits(self._rate.measured),
+            queue_delay=self._rate.queue_delay,
             long_sequence=self._long_seq,
             receive_buffer=r.receive_buffer,
             buffer_capped=self._buffer_capped,
@@ -561,6 +591,8 @@ class Endpoint:
         self._encoding = PRINTABLE
         self._capacity = 0
         self._pacer.reset()
+        self._rate = RateEstimator(self._rate_hint())
+        self._pacer.paced = self._rate.rate is not None
         self._clock = 0.0
         self._last_heard = 0.0
         self._last_probe = -math.inf
@@ -584,6 +616,8 @@ class Endpoint:
         self._window_cached = 1
         self._long_seq = False
         self._buffer_capped = False
+        self._tune_at = -math.inf
+        self._tune_taken = 0
         self._answer_with = None
 
     def _go(self, trigger: Trigger) -> None:
@@ -622,13 +656,14 @@ class Endpoint:
         try:
             theirs = InitParameters.decode(packet.data)
             mine = self._mine
-            if st is State.LISTEN and theirs.long_window is not None:
+            if st is State.LISTEN:
                 # The connector judged that its line needs more than 31
                 # packets in flight: agree if we may (a listener often has no
                 # hints of its own).  Not in a simultaneous open, where both
                 # inits are already out and each side must negotiate the
-                # same two offers.
-                mine = dataclasses.replace(mine, long_window=self._long_offer())
+                # same two offers.  answer() also echoes the XCAPAS
+                # features both know, and nothing to a request without XCAPAS.
+                mine = mine.answer(theirs, self._long_offer())
             agreed = negotiate(mine, theirs)
             self._answer_with = mine
         except RemoteProtocolError as exc:
@@ -690,6 +725,7 @@ class Endpoint:
         self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
         self._last_heard = now
         self._init_deadline = math.inf
+        self._rate.start(now, self._rtt.srtt if self._init_transmissions == 1 else None)
         if answer:
             self._answer_sent_at = now
             self._answers = 1
@@ -761,6 +797,8 @@ class Endpoint:
             # resent its init (no hints, a long line) unmeasured, and its
             # 60 s unmeasured dead_after ended a healthy link at 60 s one way.
             self._rtt.seed(now - self._answer_sent_at)
+            if self._answers == 1:
+                self._rate.seed_base(now - self._answer_sent_at)
             self._measured()
         if ptype == PacketType.INIT:
             self._on_init(packet, now)
@@ -778,10 +816,12 @@ class Endpoint:
                 self._counters["naks_received"] += 1
                 acked = self._sender.packets_acked
                 self._sender.on_nak(split[0], now, self._nak_horizon())
+                self._take_samples(now)
                 if self._sender.packets_acked > acked:  # stop-and-wait NAK(n+1) = ACK(n)
                     self._rtt.on_progress()
         elif ptype in (PacketType.DATA, PacketType.EOF):
             if self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
+                self._rate.reverse(now)
                 self._on_data(split[0], split[1], ptype == PacketType.EOF, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
@@ -832,11 +872,8 @@ class Endpoint:
             window = min(window, self._sender.window)
         fast = self._sender.fast_retransmit_count
         acked = self._sender.packets_acked
-        samples = self._sender.on_ack(seq, cum, window, now)
-        for rtt in samples:
-            self._rtt.sample(rtt)
-        if samples:
-            self._measured()
+        self._sender.on_ack(seq, cum, window, now)
+        self._take_samples(now)
         if self._sender.packets_acked > acked:
             self._rtt.on_progress()
         if self._sender.fast_retransmit_count > fast:
@@ -845,8 +882,124 @@ class Endpoint:
             self._queue_ack(self._receiver.last_in_order())
         self._check_closed(now)
 
+    def _take_samples(self, now: float) -> None:
+        """Feed the packets just acknowledged on their only copy to the
+        round-trip and rate estimators (:mod:`serialsocket._rate`)."""
+        delivered = self._sender.take_delivered()
+        measured = False
+        base = self._rate.base_rtt
+        for pkt in delivered:
+            rtt = now - pkt.done_at
+            early = not self._rate.plausible(rtt) or self._rate.fast_evidence(
+                rtt, self._tx(len(pkt.wire)), self._rtt.rttvar
+            )
+            if not early:
+                # A packet that arrived sooner than the path allows left
+                # sooner than the model said: its "round trip" is the
+                # model's error, and would shrink the timeout below the path.
+                self._rtt.sample(rtt)
+                measured = True
+            if pkt.mark is None:
+                continue
+            before = self._rate.rate
+            if self._rate.on_delivery(
+                pkt.mark, now, rtt, self._rtt.srtt, fast=early, wire_bytes=len(pkt.wire)
+            ):
+                self._rate_changed()
+                if self._rate.busy_change and (before is None or (self._rate.rate or 0.0) < before):
+                    self._rearm_queued(now, pkt.mark)
+            if self._rate.pull_back > 0:
+                self._pacer.pull_back(self._rate.pull_back, now)
+            if self._rate.queue_delay > 0:
+                free_at = self._rate.line_free_at(now, pkt.mark)
+                if free_at is not None and self._pacer.catch_up(free_at):
+                    self._rate.pushed()
+        if self._rate.base_rtt != base:
+            self._rate_changed()  # the timers' one-way delay follows the path
+        if measured:
+            self._measured()
+
+    def _rearm_queued(self, now: float, mark: RateMark) -> None:
+        """The line is slower than the model that timed the packets in flight:
+        move each one's departure, and its timer, to when it will really leave.
+
+        The packet with ``mark`` left one base round trip before ``now``;
+        every packet handed after it leaves when the bytes in between have
+        drained at the measured rate.  Without this the first flight into an
+        unknown or over-hinted line times out while still queued, and every
+        resend joins the queue behind it (a retransmission storm).
+        """
+        left = self._rate.line_free_at(now, mark)
+        rate = self._rate.rate
+        if left is None or rate is None:
+            return
+        left -= (self._rate.handed - mark.handed_end) / rate  # when that packet left
+        timeout = self._rtt.timeout()
+        for pkt in self._sender.outstanding.values():
+            if pkt.acked or pkt.deadline is None or pkt.mark is None or pkt.transmissions != 1:
+                continue
+            leaves = left + (pkt.mark.handed_end - mark.handed_end) / rate
+            if leaves > pkt.done_at:
+                pkt.done_at = leaves
+                self._sender.arm(pkt, leaves + timeout)
+
+    def _bits(self, chars_per_second: float | None) -> float | None:
+        """Characters per second as the line's bits per second."""
+        if chars_per_second is None:
+            return None
+        return chars_per_second * self.config.bits_per_char
+
+    def _rate_hint(self) -> float | None:
+        """The configured line rate in characters per second (None: not given)."""
+        cfg = self.config
+        return None if cfg.line_rate is None else cfg.line_rate / cfg.bits_per_char
+
+    def _tx(self, wire_bytes: int) -> float:
+        """Seconds the line needs for ``wire_bytes`` at the rate in use: the
+        measured one once there is a measurement, the hint before (0 when
+        neither is known)."""
+        rate = self._rate.rate
+        return 0.0 if rate is None else wire_bytes / rate
+
+    def _rate_changed(self) -> None:
+        """The rate in use or the path's base round trip moved: pacing, the
+        timeout floor, the window bound and the receive buffer follow."""
+        self._pacer.paced = self._rate.rate is not None
+        if self._negotiated is not None:
+            agreed = self._negotiated
+            self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
+            self._size_receive_buffer()
+        self._window_key = None
+
+    def _autotune(self, now: float) -> None:
+        """Grow the receive buffer to what the application takes per round trip.
+
+        A buffer sized from the hints starves a line that is faster or longer
+        than they say (a rate hint 10x low kept the window a tenth of what
+        Mars needs), and a receiver cannot measure the line through a window
+        that holds the sender back.  So, as Linux's receive-buffer autotuning
+        does: each round trip, the buffer becomes at least
+        :data:`BUFFER_ROUND_TRIPS` times what the application read in the
+        last one -- a sender held back by the window grows it every round
+        trip, and a reader that does not keep up never grows it (the bytes
+        counted are the ones read).  Never shrunk, capped by ``buffer_cap``.
+        """
+        srtt = self._rtt.srtt
+        if srtt is None or now - self._tune_at < srtt:
+            return
+        taken = self._receiver.delivered_total - len(self._receiver.readable)
+        if self._tune_at > -math.inf:
+            want = BUFFER_ROUND_TRIPS * (taken - self._tune_taken)
+            cap = self.config.buffer_cap
+            if want > cap:
+                self._buffer_capped = True
+            r = self._receiver
+            r.receive_buffer = max(r.receive_buffer, min(want, cap))
+        self._tune_at, self._tune_taken = now, taken
+
     def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
         self._peer_data_seen = True
+        self._autotune(now)
         arrival = self._receiver.on_packet(seq, data, eof, now, self._rtt.timeout())
         if self._receiver.discard and arrival.fields and self._state is State.ESTABLISHED:
             self._finish_abort("Connection closed: data refused", by_peer=False, send=True)
@@ -931,6 +1084,7 @@ class Endpoint:
         """Count a packet handed to the line; returns when it finishes leaving the UART."""
         self._counters["packets_sent"] += 1
         self._counters["wire_bytes_sent"] += len(wire)
+        self._rate.hand(len(wire))
         self._clock = max(self._clock, now)
         return self._pacer.send(len(wire), now)
 
@@ -983,6 +1137,8 @@ class Endpoint:
         out.append(pkt.wire)
         pkt.transmissions += 1
         pkt.done_at = self._account(pkt.wire, now)
+        if pkt.transmissions == 1:
+            pkt.mark = self._rate.mark(now)
         self._sender.arm(pkt, pkt.done_at + timeout)
 
     # -- internals: timing --------------------------------------------------------------
@@ -1079,9 +1235,10 @@ class Endpoint:
         """
         cfg = self.config
         want = cfg.receive_buffer
-        if cfg.line_rate is not None:
-            rtt = max(self._rtt.srtt or 0.0, 2 * cfg.one_way_delay)
-            need = int(BUFFER_ROUND_TRIPS * cfg.line_rate / cfg.bits_per_char * rtt)
+        rate = self._rate.rate
+        if rate is not None:
+            rtt = max(self._rtt.srtt or 0.0, 2 * self._one_way())
+            need = int(BUFFER_ROUND_TRIPS * rate * rtt)
             self._buffer_capped = need > cfg.buffer_cap
             want = max(want, min(need, cfg.buffer_cap))
         self._receiver.receive_buffer = max(self._receiver.receive_buffer, want)
@@ -1089,12 +1246,29 @@ class Endpoint:
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue
         (two of its packets, which are at most our receive limit), plus 10 %."""
-        cfg = self.config
-        rtt = cfg.physical_rtt(send_max_length + 1)
-        return 1.1 * (rtt + 2 * cfg.transmit_time(receive_max_length + 1)) + 0.005
+        rtt = self._physical_rtt(send_max_length + 1)
+        return 1.1 * (rtt + 2 * self._tx(receive_max_length + 1)) + 0.005
+
+    def _one_way(self) -> float:
+        """The one-way delay the timers assume: the hint, until the path's
+        base round trip is measured; then the measurement where it is
+        shorter (a hint 10x too long made every timeout floor and the NAK
+        horizon ten round trips long) or where there was no hint.  A
+        measurement never lengthens a given hint: it includes a reader's
+        batching, and the hint's exact timing is what a NAK is judged by."""
+        hint = self.config.one_way_delay
+        base = self._rate.base_rtt
+        if base is None:
+            return hint
+        measured = max((base - self._tx(_ACK_WIRE)) / 2, 0.0)
+        return measured if hint == 0 else min(hint, measured)
+
+    def _physical_rtt(self, packet_bytes: int) -> float:
+        """:meth:`EndpointConfig.physical_rtt` at the rate in use."""
+        return 2 * self._one_way() + self._tx(packet_bytes + _ACK_WIRE)
 
     def _min_rtt(self) -> float:
-        return self.config.physical_rtt(self._full_wire)
+        return self._physical_rtt(self._full_wire)
 
     def _nak_horizon(self) -> float:
         """The least time from a copy leaving our UART to a NAK *about that copy*.
@@ -1120,10 +1294,8 @@ class Endpoint:
         """
         head = b"  " if self._long_seq else b""
         nak = len(build_packet(Packet(seq=0, type=PacketType.NAK, data=head), self._send_check))
-        cr = self.config.transmit_time(1)
-        return (
-            2 * self.config.one_way_delay + self.config.transmit_time(nak) - 2 * cr - TIME_EPSILON
-        )
+        cr = self._tx(1)
+        return 2 * self._one_way() + self._tx(nak) - 2 * cr - TIME_EPSILON
 
     def _effective_window(self) -> int:
         key = (self._sender.window, self._rtt.srtt, self._full_wire)
@@ -1134,7 +1306,7 @@ class Endpoint:
 
     def _compute_effective_window(self) -> int:
         window = self._sender.window
-        tx = self.config.transmit_time(self._full_wire)
+        tx = self._tx(self._full_wire)
         if tx <= 0:
             # Rate unknown: nothing says how much the line holds, so no more
             # than the classic 31 packets go out unacknowledged, whatever

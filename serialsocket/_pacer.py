@@ -55,6 +55,21 @@ class Pacer:
         self.free_at = start + self._transmit_time(wire_bytes)
         return self.free_at
 
+    def catch_up(self, free_at: float) -> bool:
+        """The line is measured to be busy until ``free_at`` (a queue the model
+        did not know about): hold data back until then.  Never earlier than
+        the model already says.  Returns whether the model moved."""
+        if self.free_at is None or free_at > self.free_at:
+            self.free_at = free_at
+            return True
+        return False
+
+    def pull_back(self, seconds: float, now: float) -> None:
+        """The model drains later than the line really does: move the end of
+        its queue ``seconds`` earlier (not before ``now``)."""
+        if self.free_at is not None and self.free_at > now:
+            self.free_at = max(self.free_at - seconds, now)
+
     def horizon(self) -> float:
         """Seconds of bytes allowed queued in the UART before data waits here."""
         return 2 * self._transmit_time(self.full_packet)

@@ -35,6 +35,8 @@ import heapq
 from collections import deque
 from dataclasses import dataclass
 
+from ._rate import RateMark
+
 __all__ = ["Outstanding", "Sender"]
 
 
@@ -51,6 +53,7 @@ class Outstanding:
         deadline: when the retransmission timer fires, or None while queued.
         transmissions: copies sent so far.
         acked: acknowledged (kept until the window slides past it).
+        mark: what the rate estimator knew when the first copy left.
     """
 
     seq: int
@@ -61,6 +64,7 @@ class Outstanding:
     deadline: float | None = None
     transmissions: int = 0
     acked: bool = False
+    mark: RateMark | None = None
 
 
 class Sender:
@@ -93,6 +97,9 @@ class Sender:
         self.bytes_acked = 0
         self.packets_acked = 0
         self.bytes_in_flight = 0
+        self.delivered: list[Outstanding] = []
+        """Packets whose only copy was acknowledged since the endpoint last
+        took them (:meth:`take_delivered`): the ACK clock's samples."""
 
     # -- application side ----------------------------------------------------------
 
@@ -159,7 +166,7 @@ class Sender:
         samples: list[float] = []
         seq = self.resolve(seq_mod)
         if seq is not None:
-            self._ack_one(seq, now, samples)
+            self._ack_one(seq, now, samples, own=True)
         if cum_mod is not None:
             offset = (cum_mod - self.base) % self.modulus
             if offset <= self.next - self.base:
@@ -209,7 +216,7 @@ class Sender:
                 # It also says the peer now expects n+1, exactly as an ACK's
                 # cumulative field would: without advancing peer_cum, room()
                 # stays 0 and nothing more is sent until a keepalive answer.
-                self._ack_one(self.next - 1, now, [])
+                self._ack_one(self.next - 1, now, [], own=True)
                 self.peer_cum = max(self.peer_cum, self.next)
                 self._slide()
             return
@@ -219,7 +226,7 @@ class Sender:
         if now - pkt.done_at >= min_rtt:
             self.schedule(seq)
 
-    def _ack_one(self, seq: int, now: float, samples: list[float]) -> None:
+    def _ack_one(self, seq: int, now: float, samples: list[float], *, own: bool = False) -> None:
         pkt = self.outstanding.get(seq)
         if pkt is None or pkt.acked:
             return
@@ -230,6 +237,16 @@ class Sender:
         self.bytes_in_flight -= pkt.payload
         if pkt.transmissions == 1 and pkt.deadline is not None:
             samples.append(now - pkt.done_at)
+            if own:
+                # Only its own ACK times a packet: one acknowledged by a later
+                # ACK's cumulative field lost its ACK, and the wait for the
+                # next one is neither the path's round trip nor a queue.
+                self.delivered.append(pkt)
+
+    def take_delivered(self) -> list[Outstanding]:
+        """The packets acknowledged on their first copy since the last call."""
+        taken, self.delivered = self.delivered, []
+        return taken
 
     def _slide(self) -> None:
         while self.base < self.next and self.outstanding[self.base].acked:

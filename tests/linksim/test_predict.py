@@ -93,8 +93,12 @@ def test_a_misplaced_object_is_flagged_and_the_model_recovers() -> None:
     assert session.run is not None
     p = session.predictor
     flagged = [d for d in p.records if d.flagged]
-    assert [(d.source, d.index) for d in flagged] == [("completion", 3)]
-    assert flagged[0].position_error == pytest.approx(0.03, abs=1e-6)
+    # Command 3's completion is flagged; a telemetry sample taken while the
+    # hand went the extra 3 cm may be flagged before it (whether one is sent
+    # in that stretch depends on when the line is free), and nothing else.
+    assert [(d.source, d.index) for d in flagged if d.source == "completion"] == [("completion", 3)]
+    assert all(d.source == "telemetry" and d.t <= flagged[-1].t for d in flagged[:-1])
+    assert flagged[-1].position_error == pytest.approx(0.03, abs=1e-6)
     # Corrected to the arm's report, the model predicts every later command exactly.
     later = [d for d in p.records if d.source == "completion" and d.index and d.index > 3]
     assert len(later) == len(TASK) - 3

@@ -29,7 +29,9 @@ from serialsocket.packets import BlockCheck, Packet, PacketType, build_packet
 from .simlink import SimLink, split_packets
 
 D = 1.0
-CFG = EndpointConfig(one_way_delay=D, window=4)
+# These scenarios script exact Kermit bytes: the classic init and prefix-encoded
+# data (dense=False; the dense encodings have their own tests, test_negotiation.py).
+CFG = EndpointConfig(dense=False, one_way_delay=D, window=4)
 
 
 def ack(seq: int, expected: int, window: int = 4, poll: bool = False) -> bytes:
@@ -59,6 +61,28 @@ def connected(
     assert [type(e) for e in a.events()] == [Connected]
     assert [type(e) for e in b.events()] == [Connected]
     return a, b, 2 * D
+
+
+def connected_on_line(
+    cfg: EndpointConfig, delay: float, rate: float
+) -> tuple[Endpoint, Endpoint, float]:
+    """As :func:`connected`, but each packet arrives its line time plus ``delay`` after
+    it is sent, as on a real line: the round trip the handshake measures is the
+    physical one, so the measurement agrees with the hints."""
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    b.listen()
+    a.connect(0.0)
+    init = a.data_to_send(0.0)
+    t = len(init) * 10 / rate + delay
+    b.receive_data(init, t)
+    answer = b.data_to_send(t)
+    t += len(answer) * 10 / rate + delay
+    a.receive_data(answer, t)
+    assert a.state is State.ESTABLISHED
+    assert b.state is State.ESTABLISHED
+    assert [type(e) for e in a.events()] == [Connected]
+    assert [type(e) for e in b.events()] == [Connected]
+    return a, b, t
 
 
 # -- connection ------------------------------------------------------------------------
@@ -125,7 +149,7 @@ def test_lost_init_answer_is_repeated_to_a_retransmitted_init() -> None:
 
 
 def test_connect_deadline() -> None:
-    a = Endpoint(EndpointConfig(one_way_delay=D, connect_timeout=6.0))
+    a = Endpoint(EndpointConfig(dense=False, one_way_delay=D, connect_timeout=6.0))
     a.connect(0.0)
     times = []
     while a.state is State.CONNECTING:
@@ -144,7 +168,7 @@ def test_connect_deadline() -> None:
 
 def test_refusal_by_the_application() -> None:
     a = Endpoint(CFG)
-    b = Endpoint(EndpointConfig(one_way_delay=D, auto_accept=False))
+    b = Endpoint(EndpointConfig(dense=False, one_way_delay=D, auto_accept=False))
     b.listen()
     a.connect(0.0)
     b.receive_data(a.data_to_send(0.0), 1.0)
@@ -162,7 +186,7 @@ def test_refusal_by_the_application() -> None:
 
 def test_application_accept() -> None:
     a = Endpoint(CFG)
-    b = Endpoint(EndpointConfig(one_way_delay=D, auto_accept=False))
+    b = Endpoint(EndpointConfig(dense=False, one_way_delay=D, auto_accept=False))
     b.listen()
     a.connect(0.0)
     b.receive_data(a.data_to_send(0.0), 1.0)
@@ -210,7 +234,7 @@ def test_seven_bit_line_refuses_a_peer_that_refuses_8th_bit_prefixing() -> None:
 
 
 def test_stop_and_wait_exactly_as_the_paper() -> None:
-    cfg = EndpointConfig(one_way_delay=D, window=1)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=1)
     a, b, t = connected(cfg)
     a.send(b"MOVE", t)
     a.send(b"", t)
@@ -236,7 +260,7 @@ def test_stop_and_wait_exactly_as_the_paper() -> None:
 
 
 def test_stop_and_wait_nak_of_next_packet_acknowledges_current() -> None:
-    cfg = EndpointConfig(one_way_delay=D, window=1)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=1)
     a, _b, t = connected(cfg)
     a.send(b"X", t)
     a.data_to_send(t)
@@ -249,7 +273,7 @@ def test_stop_and_wait_nak_of_next_packet_reopens_the_window() -> None:
     # receiver (already holding 1) NAKs 2.  NAK(2) = ACK(1) must also tell the
     # sender the peer expects 2, or packet 2 waits for a keepalive probe
     # (dead_after / 4 of silence) -- forever with dead_after very large.
-    cfg = EndpointConfig(one_way_delay=D, window=1, dead_after=10_000.0)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=1, dead_after=10_000.0)
     a, b, t = connected(cfg)
     a.send(b"MOVE", t)
     first = a.data_to_send(t)
@@ -282,8 +306,8 @@ def test_nak_for_a_damaged_packet_is_honoured_on_a_rate_limited_line() -> None:
     # A NAK arriving sooner can only be about an earlier copy and must not
     # provoke another resend.  (Counting both CRs, the threshold was two
     # character times late and every such NAK was ignored.)
-    cfg = EndpointConfig(one_way_delay=D, line_rate=2400, window=1)
-    a, b, t = connected(cfg)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, line_rate=2400, window=1)
+    a, b, t = connected_on_line(cfg, D, 2400)
     a.send(b"CLOSE", t)
     pkt = a.data_to_send(t)
     assert pkt == data(1, b"CLOSE")
@@ -387,7 +411,7 @@ def test_an_ack_of_a_resent_packet_clears_the_backoff() -> None:
 def test_backoff_stops_at_half_of_dead_after() -> None:
     # dead_after 20 s: the ceiling is 10 s (not 60), so timers run 6, 10, 10 and
     # a copy always leaves with half of dead_after left for its answer.
-    a, _b, t = connected(EndpointConfig(one_way_delay=D, window=4, dead_after=20.0))
+    a, _b, t = connected(EndpointConfig(dense=False, one_way_delay=D, window=4, dead_after=20.0))
     a.send(b"one", t)
     p1 = a.data_to_send(t)
     deadlines = []
@@ -458,7 +482,7 @@ def test_both_directions_at_once() -> None:
 
 
 def test_window_full_holds_new_data_until_an_ack() -> None:
-    a, _b, t = connected(EndpointConfig(one_way_delay=D, window=2))
+    a, _b, t = connected(EndpointConfig(dense=False, one_way_delay=D, window=2))
     for word in (b"1", b"2", b"3"):
         a.send(word, t)
         a.data_to_send(t)
@@ -469,7 +493,7 @@ def test_window_full_holds_new_data_until_an_ack() -> None:
 
 
 def test_large_write_is_cut_into_full_packets_and_short_write_goes_at_once() -> None:
-    a, b, t = connected(EndpointConfig(one_way_delay=D, window=31))
+    a, b, t = connected(EndpointConfig(dense=False, one_way_delay=D, window=31))
     a.send(b"x" * 10 + bytes(range(256)) * 4, t)
     packets = split_packets(a.data_to_send(t))
     assert all(len(p) <= 129 for p in packets)
@@ -479,7 +503,7 @@ def test_large_write_is_cut_into_full_packets_and_short_write_goes_at_once() -> 
 
 
 def test_zero_window_then_reopen() -> None:
-    cfg = EndpointConfig(one_way_delay=D, window=31, receive_buffer=18_062)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=31, receive_buffer=18_062)
     a, b, t = connected(cfg)
     link = SimLink(a, b, delay=D)
     link.now = t
@@ -505,13 +529,13 @@ def test_zero_window_then_reopen() -> None:
 
 
 def test_effective_window_covers_the_repair_horizon() -> None:
-    # 2400 bit/s, 1.3 s, 128-byte packets: tx = 129/240 = 0.5375 s.  The helper's
-    # hand-stepped handshake measures 2.0 s, below the physical round trip
-    # 2.6 + 139/240 = 3.179 s, which therefore counts:
-    # ceil(3 x 3.179 / 0.5375) + 5 = 18 + 5 = 23 packets.
+    # 2400 bit/s, 1.3 s, 128-byte packets: tx = 129/240 = 0.5375 s.  The handshake
+    # runs on the line, so what it measures agrees with the physical round trip
+    # 2.6 + 139/240 = 3.179 s: ceil(3 x 3.179 / 0.5375) + 5 = 18 + 5 = 23 packets.
+    # (A round trip measured below the hinted one wins: the hint was too long.)
     def effective(line_rate: float | None, window: int) -> int:
         cfg = EndpointConfig(one_way_delay=1.3, line_rate=line_rate, window=window)
-        a, _b, _t = connected(cfg)
+        a, _b, _t = connected_on_line(cfg, 1.3, line_rate or 2400)
         return a.statistics().effective_window
 
     assert effective(line_rate=2400, window=31) == 23
@@ -624,7 +648,7 @@ def test_abort_tells_the_peer_why() -> None:
 
 
 def test_dead_link_reports_what_was_delivered_and_what_was_not() -> None:
-    cfg = EndpointConfig(one_way_delay=D, window=2, dead_after=30.0)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=2, dead_after=30.0)
     a, b, t = connected(cfg)
     a.send(b"A" * 50, t)
     b.receive_data(a.data_to_send(t), t + 1)
@@ -647,7 +671,7 @@ def test_dead_link_reports_what_was_delivered_and_what_was_not() -> None:
 
 
 def test_idle_link_is_probed_and_the_peer_answers() -> None:
-    cfg = EndpointConfig(one_way_delay=D, window=4, dead_after=40.0)
+    cfg = EndpointConfig(dense=False, one_way_delay=D, window=4, dead_after=40.0)
     a, b, t = connected(cfg)
     assert a.get_timer() == t + 10.0  # a quarter of dead_after
     a.handle_timer(t + 10.0)

@@ -1,0 +1,428 @@
+"""The line's rate and the queue in front of it, measured from the ACK clock (sans-I/O).
+
+A serial path is a fixed-rate line behind first-in-first-out queues the
+endpoint cannot see: the UART's FIFO, the tty buffer, a pty relay holding
+tens of KB.  Hints (``line_rate``) say how fast the line drains them; they
+may be missing or wrong by ten times.  This module measures what the hints
+only guess, as TCP BBR does, and the endpoint paces, sizes its window and
+times its repairs from the measurement:
+
+Delivery rate
+    Every byte we hand to the line -- data, ACKs, NAKs -- passes the same
+    queue.  When the first copy of packet P is acknowledged, every byte
+    handed up to P's end has left the line; so has every byte handed up to
+    the packet acknowledged last before P was sent (the *delivery point*
+    P's mark remembers).  The bytes between the two left in the time
+    between the two ACKs: the path's delay is in both and cancels.  If the
+    line idled in between, the sample is below its rate, never above it
+    (apart from jitter, which an interval of about a round trip averages
+    out), so the estimate is the largest recent sample.
+
+Queue lag
+    A packet's round trip is measured from when the pacer's model says it
+    left the UART.  When the model drains faster than the line (no rate
+    known, or a rate hint too high) the packet really left later, and its
+    round trip exceeds the path's base round trip by the time it waited:
+    the queue the model did not know about.  When the model drains slower
+    than the line (a rate hint too low) the packet left *earlier* than
+    modelled and its round trip comes out shorter than the path allows:
+    proof that the line is faster than assumed.
+
+How the estimate moves (:meth:`RateEstimator.on_delivery`):
+
+* no rate known: the first run of queued deliveries sets it (an unpaced
+  sender that never builds a queue needs no rate: nothing waits anywhere);
+* up, whenever a sample shows more than the estimate (the line delivered
+  it, so it can), and doubled, at most once a round trip, while packets
+  arrive sooner than the path's base round trip allows (the model is too
+  slow and the pacer holds back what the line could carry);
+* down to the measured rate only while the queue proves the line busy at
+  both ends of the sample's interval (an idle application or a shut window
+  also makes samples low, and must not slow the pacer).
+
+The peer's ACKs share its line with its own data: an ACK that waited behind
+a reply packet arrives late, the next one early, and the round trip grows
+with a queue that is not ours.  So an interval in which the peer's data
+arrived (:meth:`RateEstimator.reverse`) neither counts as queued nor gives a
+sample: the ACK clock measures our line only while the way back is quiet.
+(An arm server's replies made a 9600 bit/s line look like 1400 bit/s, and
+the pacer held an emergency stop back for seconds.)
+
+Nothing here reads a clock: every method takes ``now``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+__all__ = ["RateEstimator", "RateMark"]
+
+RAISE_MARGIN = 1.05
+"""A sample must beat the estimate by 5 % to raise it (jitter is not speed)."""
+
+LOWER_MARGIN = 0.9
+"""The estimate drops to the measured rate only when that is 10 % below it."""
+
+BUSY_RUN_PACKETS = 3
+"""Deliveries after the first of a queued run before its rate counts,
+unless they span :data:`BUSY_RUN_SPAN` already."""
+
+BUSY_REFINE = 0.002
+"""A busy run's rate replaces the estimate when they differ by more than this."""
+
+BUSY_RUN_SPAN = 0.25
+"""Seconds a queued run must span to count after one delivery: long against
+the jitter of a tty read, short against a slow line's packet time."""
+
+RAMP_MIN = 2.0
+"""Least factor the rate grows by when packets arrive earlier than modelled."""
+
+RAMP_MAX = 4.0
+"""Most it grows by in one round trip (a queue of three times the line's
+round trip at most, which the next busy run measures and drains)."""
+
+LOOSE_SEED_DELIVERIES = 4
+"""Deliveries (with the way back quiet) that tighten a listener's seeded
+reference round trip before :meth:`RateEstimator.fast_evidence` uses it."""
+
+MAX_FILTER_ROUND_TRIPS = 10
+"""Samples older than this many round trips leave the windowed maximum."""
+
+
+@dataclass(frozen=True, slots=True)
+class RateMark:
+    """What the estimator knew when a packet's first copy was handed to the line.
+
+    Attributes:
+        handed_end: bytes handed to the line up to and including this packet.
+        point_time: when the delivery point was reached (an ACK's arrival).
+        point_handed: ``handed_end`` of the packet acknowledged at that point.
+        point_queued: that packet had waited in a queue (the line was busy).
+        sent_at: when this packet was handed to the line.
+        epoch: the estimate's version when this packet was sent.
+    """
+
+    handed_end: int
+    point_time: float
+    point_handed: int
+    point_queued: bool
+    sent_at: float
+    epoch: int
+
+
+class RateEstimator:
+    """Delivery-rate and queue-lag estimation for one connection.
+
+    Rates are in wire characters per second.
+
+    Args:
+        hint: the configured rate, where estimation starts (None: unknown).
+    """
+
+    def __init__(self, hint: float | None) -> None:
+        self.hint = hint
+        self.rate: float | None = hint
+        """The rate the endpoint paces at and times by (None: unknown)."""
+        self.measured: float | None = None
+        """The windowed maximum of the delivery samples (None before one)."""
+        self.queue_delay = 0.0
+        """Seconds the last acknowledged packet waited in a queue the model
+        did not know about (0 when the model and the line agree)."""
+        self.base_rtt: float | None = None
+        """The path's round trip from a packet leaving the UART to its ACK,
+        without queueing: the least seen, from the init exchange on."""
+        self.init_rtt: float | None = None
+        """The init exchange's round trip, measured from the init being
+        handed to the line: the one sample no rate model touched."""
+        self.busy_change = False
+        """The last :meth:`on_delivery` set the rate from a busy line (exact)."""
+        self.samples = 0
+        self.raises = 0
+        self.lowers = 0
+        self._handed = 0
+        self._point_time: float | None = None
+        self._point_handed = 0
+        self._point_queued = False
+        self._max: deque[tuple[float, float]] = deque()
+        self._epoch = 0
+        self._offset_epoch = -1
+        self._pushed = False
+        self.pull_back = 0.0
+        """Seconds the pacer's model should move earlier (set by :meth:`on_delivery`)."""
+        self._init_bytes = 0
+        self._last_queued = False
+        self._run: tuple[float, int, int] | None = None
+        self._reverse_at = -math.inf
+        self._loose = 0
+        """Deliveries left before a listener's seeded :attr:`init_rtt` is
+        trusted as the reference of :meth:`fast_evidence` (0: trusted)."""
+
+    # -- what the endpoint tells us --------------------------------------------------
+
+    def start(self, now: float, base_rtt: float | None) -> None:
+        """The connection is established at ``now``: this is the first
+        delivery point (everything handed so far was the init exchange).
+
+        ``base_rtt`` is the init exchange's round trip, if one was measured:
+        an upper bound of the path's base round trip (it includes the two
+        init packets' transmit times)."""
+        self._point_time = now
+        self._point_handed = self._handed
+        self._point_queued = False
+        self._init_bytes = self._handed
+        if base_rtt is not None:
+            self.base_rtt = self.init_rtt = base_rtt
+
+    def seed_base(self, upper_bound: float) -> None:
+        """A listener's first round trip, from its init answer to the
+        connector's next packet: an upper bound of the base round trip."""
+        if self.init_rtt is None:
+            # Only a bound: the connector may have sent its first packet a
+            # while after our answer arrived.  A reference too long would
+            # make every sample look early and ramp the rate up (an arm
+            # server seeded 0.27 s long paced at 8 times a 9600 bit/s line),
+            # so the first deliveries tighten it before it is trusted.
+            self.init_rtt = upper_bound
+            self._loose = LOOSE_SEED_DELIVERIES
+        if self.base_rtt is None:
+            self.base_rtt = upper_bound
+
+    def reverse(self, now: float) -> None:
+        """A packet carrying the peer's data arrived: the ACKs behind it on
+        the peer's line were delayed by it, not by ours."""
+        self._reverse_at = now
+
+    def hand(self, wire_bytes: int) -> None:
+        """Count bytes handed to the line (every packet, any kind)."""
+        self._handed += wire_bytes
+
+    def mark(self, now: float) -> RateMark | None:
+        """The mark for a packet's first copy, handed just now (after :meth:`hand`).
+        None before the connection is established."""
+        if self._point_time is None:
+            return None
+        return RateMark(
+            handed_end=self._handed,
+            point_time=self._point_time,
+            point_handed=self._point_handed,
+            point_queued=self._point_queued,
+            sent_at=now,
+            epoch=self._epoch,
+        )
+
+    @property
+    def handed(self) -> int:
+        """Bytes handed to the line so far."""
+        return self._handed
+
+    def plausible(self, rtt: float) -> bool:
+        """Could the path really have carried a packet and its ACK this fast?
+
+        Not faster than the init exchange, less the two init packets'
+        transmit times it paid and a data packet's ACK does not.  A shorter
+        sample is the model's error (it put the departure too late: a queue
+        drained at a rate measured a little low) or an ACK for an older
+        packet with the same wire number; taken as the path's base it would
+        make every later round trip look queued and every timer too short.
+        """
+        if self.init_rtt is None:
+            return True
+        if self.rate is None or self._loose:
+            return rtt >= self.init_rtt / 2
+        return rtt >= self.init_rtt - 2 * self._init_bytes / self.rate - 0.01
+
+    def fast_evidence(self, rtt: float, model_tx: float, rttvar: float) -> bool:
+        """A round trip this short means the packet left before the model said.
+
+        The init exchange's round trip is the reference: it was measured
+        from the moment the init was handed to the line, so no model is in
+        it, and it includes two init packets' transmit times that a data
+        packet's ACK does not pay.  A paced packet's modelled departure is up
+        to three of its transmit times after it was handed over (two packets
+        queued ahead of it in the model); on a line k times faster than the
+        model it really left after one real transmit time, so its round trip
+        comes out about (3k - 1) real transmit times short -- more than the
+        one modelled transmit time allowed here for every k above about 1.2,
+        and never for k = 1.
+
+        Args:
+            rtt: the sample, from the model's departure time to the ACK.
+            model_tx: the model's transmit time of that packet.
+            rttvar: the round-trip variation (jitter allowance).
+        """
+        if self.init_rtt is None or self.rate is None or self._loose:
+            return False
+        # Jitter allowance: the measured variation, but no more than 50 ms
+        # and 1 % of the path -- before any plausible sample the variation
+        # is the seed's half round trip, which would hide every deficit.
+        jitter = min(rttvar, 0.05 + 0.01 * self.init_rtt)
+        return rtt < self.init_rtt - (model_tx + jitter + 0.01)
+
+    def on_delivery(
+        self,
+        mark: RateMark,
+        now: float,
+        rtt: float,
+        srtt: float | None,
+        *,
+        fast: bool,
+        wire_bytes: int = 0,
+    ) -> bool:
+        """The first copy of the packet with ``mark`` was acknowledged at ``now``.
+
+        Args:
+            rtt: its round-trip sample (from the model's departure time).
+            srtt: the smoothed round trip (the filter's time scale).
+            wire_bytes: the packet's length on the wire.
+            fast: the sample is early: :meth:`fast_evidence` held, or it is
+                not :meth:`plausible` (the model's departure was too late).
+
+        Returns:
+            True when :attr:`rate` changed.
+        """
+        changed = False
+        queued = False
+        self.busy_change = False
+        if not fast and (self.base_rtt is None or rtt < self.base_rtt) and self.plausible(rtt):
+            self.base_rtt = rtt
+        # The peer's data crossed the interval: its ACKs were timed by its line.
+        tainted = self._reverse_at > mark.point_time
+        if self._loose and not fast and not tainted and self.init_rtt is not None:
+            self.init_rtt = min(self.init_rtt, rtt)
+            self._loose -= 1
+        if tainted:
+            self._run = None
+            self._last_queued = False
+            self.queue_delay = 0.0
+        elif self.base_rtt is not None and not fast:
+            lag = rtt - self.base_rtt
+            # Jitter and the model's rounding are not a queue: 50 ms plus 5 %
+            # of the path (a fraction alone would hide a real queue on a
+            # long path, an absolute alone would see one in every relay).
+            queued = lag > 0.05 + 0.05 * self.base_rtt
+            # Two in a row: one late ACK is a lost ACK or a burst of jitter
+            # as often as a queue.
+            self.queue_delay = lag if queued and self._last_queued else 0.0
+            self._last_queued = queued
+        busy = None if tainted else self._busy_sample(mark, now, queued)
+        interval = now - mark.point_time
+        if not tainted and mark.handed_end > mark.point_handed and interval > 0:
+            sample = (mark.handed_end - mark.point_handed) / interval
+            self.samples += 1
+            self._push(sample, now, srtt)
+            measured = self._max[0][1]
+            self.measured = measured
+            if busy is not None and (
+                self.rate is None or abs(busy - self.rate) > BUSY_REFINE * self.rate
+            ):
+                # The line was busy all along: this is its rate, up or down
+                # (refined as the run grows: a rate 1 % low misplaces the end
+                # of a minute of queue by 0.6 s).
+                if self.rate is not None:
+                    if busy > self.rate * RAISE_MARGIN:
+                        self.raises += 1
+                    elif busy < self.rate * LOWER_MARGIN:
+                        self.lowers += 1
+                self.rate = busy
+                self.busy_change = True
+                changed = True
+            elif self.rate is not None and measured > self.rate * RAISE_MARGIN:
+                self.rate = measured
+                self.raises += 1
+                changed = True
+        self.pull_back = 0.0
+        if fast and self.rate is not None and mark.epoch == self._epoch:
+            if self._offset_epoch != self._epoch and self._pushed:
+                # The model put this packet's departure too late.  First
+                # assume an offset (the end of a long queue misplaced by a
+                # rate a little off): pull the model back once and watch
+                # the packets sent after that.
+                reference = self.base_rtt if self.base_rtt is not None else self.init_rtt
+                self.pull_back = max((reference or 0.0) - rtt, 0.0)
+                self._epoch += 1
+                self._offset_epoch = self._epoch
+                self._pushed = False
+            else:
+                # Sent after the model was pulled back, and early again: the
+                # model drains slower than the line and the pacer holds back
+                # what the line could carry.  Double, until the queue (or a
+                # busy run's measurement) says stop.
+                self.rate *= self._ramp(mark, now, wire_bytes)
+                self.raises += 1
+                changed = True
+        if mark.handed_end >= self._point_handed:
+            self._point_time = now
+            self._point_handed = mark.handed_end
+            self._point_queued = queued
+        if changed:
+            self._epoch += 1
+        return changed
+
+    def _busy_sample(self, mark: RateMark, now: float, queued: bool) -> float | None:
+        """The line's rate over a run of deliveries that all waited in a queue.
+
+        While packets queue, the line never idles between their departures,
+        so the bytes handed between two of them left in exactly the time
+        between their ACKs.  Measured from the run's first delivery, the span
+        grows with the run and jitter in any one ACK fades; a run of fewer
+        than :data:`BUSY_RUN_PACKETS` deliveries gives nothing yet.
+        """
+        if not queued:
+            self._run = None
+            return None
+        if self._run is not None and self._reverse_at > self._run[0]:
+            self._run = None  # the peer's data arrived within the run: start again
+        if self._run is None:
+            self._run = (now, mark.handed_end, 0)
+            return None
+        t0, h0, n = self._run
+        n += 1
+        self._run = (t0, h0, n)
+        if mark.handed_end <= h0 or now <= t0:
+            return None
+        if n < BUSY_RUN_PACKETS and now - t0 < BUSY_RUN_SPAN:
+            return None
+        return (mark.handed_end - h0) / (now - t0)
+
+    def _push(self, sample: float, now: float, srtt: float | None) -> None:
+        horizon = MAX_FILTER_ROUND_TRIPS * (srtt or 0.0)
+        while self._max and self._max[-1][1] <= sample:
+            self._max.pop()
+        self._max.append((now, sample))
+        while len(self._max) > 1 and now - self._max[0][0] > horizon:
+            self._max.popleft()
+
+    def _ramp(self, mark: RateMark, now: float, wire_bytes: int) -> float:
+        """How much faster than the model the line is, judged from one early
+        packet: between :data:`RAMP_MIN` and :data:`RAMP_MAX` times.
+
+        From handing the packet over to its ACK took its real transmit time
+        (the line is faster than the model, so nothing queued ahead of it)
+        plus the path's base round trip, which the init exchange bounds from
+        above; what is left is the packet's real transmit time, or less.  At
+        long delays this reaches the line in two round trips where doubling
+        needs four -- at Mars, 40 minutes each.
+        """
+        if self.rate is None or self.init_rtt is None or wire_bytes <= 0:
+            return RAMP_MIN
+        tx = now - mark.sent_at - self.init_rtt
+        if tx <= 0:
+            return RAMP_MAX
+        return min(max(wire_bytes / tx / self.rate, RAMP_MIN), RAMP_MAX)
+
+    def pushed(self) -> None:
+        """The endpoint moved the pacer's model later (a queue was found):
+        an early packet after this may be that move's error, not speed."""
+        self._pushed = True
+
+    def line_free_at(self, now: float, mark: RateMark) -> float | None:
+        """When the line will have sent everything handed so far, judged from
+        the packet with ``mark`` acknowledged at ``now`` (None: no rate or no
+        base round trip).  The packet left the line one base round trip ago;
+        what was handed after it drains at :attr:`rate` from then on."""
+        if self.rate is None or self.base_rtt is None:
+            return None
+        left = now - self.base_rtt
+        return left + (self._handed - mark.handed_end) / self.rate

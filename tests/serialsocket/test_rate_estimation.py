@@ -1,0 +1,167 @@
+"""The line's rate is measured from the ACK clock (issue 20 section 1).
+
+A rate hint is where estimation starts: given 10x too high (a timeout storm
+before: 0.02 of the limit at 2400 bit/s, 1.3 s, 1e-4), 10x too low (the
+pacer held the line to a tenth: 0.10) or not at all (0.48: 31 packets
+dumped into the tty queue, every round trip inflated by it), the endpoint
+measures the line and paces by the measurement.  With the right hint
+nothing moves.  Virtual time, seeded.
+"""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from linksim.bench._transfer import simulate
+from serialsocket import Endpoint, EndpointConfig
+from serialsocket._rate import RateEstimator
+from serialsocket.packets import PRINTABLE
+
+from .simlink import SimLink
+
+PAYLOAD = random.Random(21).randbytes(60_000)
+RATE = 2400
+DELAY = 1.3
+
+
+def _run(hints: str) -> tuple[float, int]:
+    m = simulate(
+        PAYLOAD,
+        rate=RATE,
+        delay=DELAY,
+        byte_error_rate=1e-4,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=3,
+        time_cap=20_000,
+        hints=hints,
+    )
+    assert m.end == "complete"
+    assert m.ok
+    return m.delivered / m.seconds, m.timeouts
+
+
+def test_the_right_hint_and_the_wrong_ones_reach_the_same_speed() -> None:
+    exact, exact_timeouts = _run("exact")
+    for hints in ("none", "wrong-rate-low", "wrong-rate-high"):
+        goodput, timeouts = _run(hints)
+        # The issue's targets: no hints >= 0.9 of the exact-hints goodput,
+        # wrong hints >= 0.8.  No storm: a handful of timeouts at most.
+        assert goodput >= 0.9 * exact, (hints, goodput, exact)
+        assert timeouts <= exact_timeouts + 30, (hints, timeouts)
+
+
+def _endpoints(line_rate: float | None) -> tuple[Endpoint, Endpoint, SimLink]:
+    cfg = EndpointConfig(one_way_delay=DELAY, line_rate=line_rate, window=31)
+    a, b = Endpoint(cfg), Endpoint(EndpointConfig(one_way_delay=DELAY, line_rate=RATE))
+    link = SimLink(a, b, delay=DELAY, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    return a, b, link
+
+
+@pytest.mark.parametrize("hint", [None, RATE / 10, RATE * 10])
+def test_statistics_report_the_measured_rate(hint: float | None) -> None:
+    a, b, link = _endpoints(hint)
+    data = random.Random(5).randbytes(40_000)
+    sent = 0
+    got = bytearray()
+    while len(got) < len(data):
+        sent += a.send(data[sent:], link.now)
+        link.step()
+        got += b.read(None, link.now)
+    assert bytes(got) == data
+    st = a.statistics()
+    assert st.line_rate is not None
+    assert st.line_rate == pytest.approx(RATE, rel=0.05)
+    assert st.measured_rate is not None
+    assert st.measured_rate <= RATE * 1.05
+    assert st.base_rtt is not None
+    assert 2 * DELAY < st.base_rtt < 2 * DELAY + 0.5
+    assert st.queue_delay < 1.0  # drained: pacing by the measurement keeps it so
+
+
+def test_an_exact_hint_is_never_moved() -> None:
+    a, b, link = _endpoints(RATE)
+    data = random.Random(6).randbytes(30_000)
+    sent = 0
+    got = bytearray()
+    while len(got) < len(data):
+        sent += a.send(data[sent:], link.now)
+        link.step()
+        got += b.read(None, link.now)
+    assert a.statistics().line_rate == RATE
+    assert a._rate.raises == a._rate.lowers == 0
+
+
+def test_light_traffic_without_a_hint_stays_unpaced() -> None:
+    # A command now and then never queues: nothing to measure, nothing to pace.
+    a, b, link = _endpoints(None)
+    for i in range(5):
+        a.send(b"MOVE %d" % i, link.now)
+        link.run_for(10.0)
+    assert b.read(None, link.now) == b"".join(b"MOVE %d" % i for i in range(5))
+    assert a.statistics().line_rate is None
+
+
+def test_a_busy_run_measures_the_line_exactly() -> None:
+    est = RateEstimator(None)
+    est.start(0.0, 2.0)
+    marks = []
+    for _ in range(8):  # eight 100-byte packets handed at once
+        est.hand(100)
+        mark = est.mark(0.0)
+        assert mark is not None
+        marks.append(mark)
+    # The line drains 100 bytes a second: packet k leaves at k + 1 and its
+    # ACK is back 2 s later (the base round trip).
+    for k, mark in enumerate(marks):
+        now = k + 1 + 2.0
+        est.on_delivery(mark, now, now - 0.0, 2.0, fast=False)
+    assert est.rate == pytest.approx(100.0)
+
+
+def test_the_peers_data_on_the_way_back_is_not_our_queue() -> None:
+    # The same run, but the peer's data arrives between our ACKs: its line,
+    # not ours, spaced them (an arm server's replies made a 9600 bit/s line
+    # look like 1400 and held an emergency stop back).  Nothing is measured.
+    est = RateEstimator(960.0)
+    est.start(0.0, 2.0)
+    marks = []
+    for _ in range(8):
+        est.hand(100)
+        mark = est.mark(0.0)
+        assert mark is not None
+        marks.append(mark)
+    for k, mark in enumerate(marks):
+        now = 3 * k + 3.0  # an ACK every 3 s: far slower than the hint
+        est.reverse(now - 0.5)  # behind a reply packet
+        est.on_delivery(mark, now, now - 0.0, 2.0, fast=False)
+    assert est.rate == 960.0
+    assert est.queue_delay == 0.0
+    assert est.lowers == 0
+
+
+def test_a_listeners_seeded_round_trip_is_tightened_before_it_judges_speed() -> None:
+    # A listener's first round trip is only a bound (the connector may wait
+    # before its first packet): seeded 0.3 s long, it made every later sample
+    # look early and ramped an arm server to 8 times its 9600 bit/s line.
+    est = RateEstimator(960.0)
+    est.start(0.0, None)
+    est.seed_base(2.9)  # the path's round trip is 2.6 s
+    assert est.plausible(2.6)
+    assert not est.fast_evidence(2.6, 0.05, 0.01)
+    for k in range(4):  # four quiet deliveries tighten it to what they measured
+        est.hand(50)
+        mark = est.mark(10.0 * k)
+        assert mark is not None
+        est.on_delivery(mark, 10.0 * k + 2.6, 2.6, 2.6, fast=False)
+    assert est.rate == 960.0
+    assert est.init_rtt == pytest.approx(2.6)
+    assert not est.fast_evidence(2.6, 0.05, 0.01)
+    assert est.fast_evidence(2.0, 0.05, 0.01)  # now a real deficit counts
