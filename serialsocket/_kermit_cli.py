@@ -139,7 +139,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
             help="file names as they are (default: common form on send, lower case on receive)",
         )
         p.add_argument(
-            "--window", type=KERMIT_WINDOW, default=8, help="window slots, 1..31 (default 8)"
+            "--window", type=KERMIT_WINDOW, default=31, help="window slots, 1..31 (default 31)"
         )
         p.add_argument(
             "--check",

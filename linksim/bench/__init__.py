@@ -6,7 +6,8 @@ and the text output.
 
 * ``codec``: :func:`run_codec`; ``relay``: :func:`measure_relay`; ``pty``:
   :func:`run_bench_pty`; ``latency``: :func:`run_latency`; ``flood``:
-  :func:`run_flood`; ``kermit``: :func:`run_bench_kermit` (:class:`TransferSetup`,
+  :func:`run_flood`; ``kermit``: :func:`run_bench_kermit` and
+  :func:`run_kermit_table` (:class:`TransferSetup`,
   :func:`run_kermit_transfer`, also the interop tests' entry point).
 * ``goodput``: :func:`run_goodput_transfer` (one transfer); :func:`standard_grid` /
   :func:`custom_grid` choose the points, :func:`run_grid` runs them (:func:`run_point`
@@ -23,7 +24,7 @@ from ._goodput import custom_grid, missing_row_keys, standard_grid
 from ._goodput import run_transfer as run_goodput_transfer
 from ._grid import SWEEPS, Point, auto_packet_length, cpu_count, run_grid, run_point
 from ._kermit import DEFAULT_PAIRS as KERMIT_PAIRS
-from ._kermit import TransferSetup, bad_pairing, run_bench_kermit
+from ._kermit import TransferSetup, bad_pairing, run_bench_kermit, run_kermit_table
 from ._kermit import run_transfer as run_kermit_transfer
 from ._latency import TRANSPORTS as LATENCY_TRANSPORTS
 from ._latency import run as run_latency
@@ -65,6 +66,7 @@ __all__ = [
     "run_flood",
     "run_goodput_transfer",
     "run_grid",
+    "run_kermit_table",
     "run_kermit_transfer",
     "run_latency",
     "run_point",

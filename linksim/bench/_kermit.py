@@ -22,11 +22,13 @@ from __future__ import annotations
 import contextlib
 import os
 import pathlib
+import random
 import shutil
 import statistics
 import tempfile
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import trio
@@ -52,6 +54,7 @@ __all__ = [
     "run_against_server",
     "run_bench_kermit",
     "run_interrupted",
+    "run_kermit_table",
     "run_transfer",
 ]
 
@@ -101,6 +104,13 @@ class TransferSetup:
             -- for reliable lines only.
         force3: ours uses FORCE-3 (block check 5; C-Kermit's own side is
             set through ``extra_ckermit``).
+        defaults: every side runs with its own defaults, as a user who
+            tunes nothing: ours with the line only (``KermitConfig(delay=,
+            rate=)``, what ``serialsocket kermit send --baud R --delay D``
+            runs), C-Kermit with its line, file and streaming settings only
+            (its window 30, receive packet-length 4000, dynamic timers, 10
+            retries); ``window``, ``packet_length`` and ``timeout`` are then
+            ignored.  G-Kermit always runs with its defaults but ``-b``.
         extra_ckermit: more C-Kermit commands, before SEND/RECEIVE.
     """
 
@@ -121,6 +131,7 @@ class TransferSetup:
     dynamic_length: bool = True
     force3: bool = False
     streaming: bool = False
+    defaults: bool = False
     extra_ckermit: tuple[str, ...] = ()
 
 
@@ -139,14 +150,17 @@ def _ckermit_argv(setup: TransferSetup, line: str, files: Sequence[pathlib.Path]
         "set file collision overwrite",
         "set file incomplete keep",
         "set attributes on",
-        f"set window {setup.window}",
-        f"set receive packet-length {setup.packet_length}",
-        "set block-check 3",
-        f"set send timeout {setup.timeout} fixed",
-        f"set receive timeout {setup.timeout}",
-        "set retry-limit 20",
-        *setup.extra_ckermit,
     ]
+    if not setup.defaults:
+        cmds += [
+            f"set window {setup.window}",
+            f"set receive packet-length {setup.packet_length}",
+            "set block-check 3",
+            f"set send timeout {setup.timeout} fixed",
+            f"set receive timeout {setup.timeout}",
+            "set retry-limit 20",
+        ]
+    cmds += setup.extra_ckermit
     if files:
         verb = "send" if len(files) == 1 else "msend"
         if setup.resend:
@@ -173,6 +187,16 @@ def _gkermit_argv(setup: TransferSetup, files: Sequence[pathlib.Path]) -> list[s
 
 
 def _our_config(setup: TransferSetup) -> KermitConfig:
+    if setup.defaults:
+        return KermitConfig(
+            delay=setup.delay,
+            rate=None if setup.rate is None else round(setup.rate),
+            seven_bit=setup.seven_bit,
+            literal_names=setup.literal_names,
+            text=setup.text,
+            resend=setup.resend,
+            streaming=setup.streaming,
+        )
     return KermitConfig(
         max_packet_length=setup.packet_length,
         window=setup.window,
@@ -580,4 +604,109 @@ def run_bench_kermit(
         "rate": base.rate,
         "timeout": base.timeout,
         "results": results,
+    }
+
+
+TABLE_LINES = ((2400, 8192), (9600, 32768))
+"""(bit/s, file bytes) of :func:`run_kermit_table`: issue 23's Moon lines."""
+TABLE_DELAY = 1.3
+TABLE_BER = 1e-3
+TABLE_HAND_TUNED = (8, 16)
+"""Windows of the hand-tuned C-Kermit reference (250-character packets)."""
+_HAND_LENGTH = 250
+_TABLE_TIMEOUT = 10
+_TABLE_PARALLEL = 12
+"""Transfers run at once: each waits on its line almost all the time."""
+
+
+def _table_setups(seeds: Sequence[int]) -> list[tuple[str, TransferSetup]]:
+    """Each row's setting name and setup: our defaults both ways, and the reference."""
+    rows: list[tuple[str, TransferSetup]] = []
+    for rate, _ in TABLE_LINES:
+        line = TransferSetup(
+            sender="ours",
+            receiver="ckermit",
+            delay=TABLE_DELAY,
+            byte_error_rate=TABLE_BER,
+            rate=rate,
+            limit=900.0,
+        )
+        for seed in seeds:
+            defaults = replace(line, defaults=True, seed=seed, timeout=_TABLE_TIMEOUT)
+            rows.append(("defaults", defaults))
+            rows.append(("defaults", replace(defaults, sender="ckermit", receiver="ours")))
+            for window in TABLE_HAND_TUNED:
+                rows.append(
+                    (
+                        f"hand-tuned, window {window}",
+                        replace(
+                            line,
+                            sender="ckermit",
+                            seed=seed,
+                            window=window,
+                            packet_length=_HAND_LENGTH,
+                            timeout=_TABLE_TIMEOUT,
+                        ),
+                    )
+                )
+    return rows
+
+
+def _table_row(setting: str, setup: TransferSetup, workdir: pathlib.Path) -> dict[str, object]:
+    size = dict(TABLE_LINES)[round(setup.rate or 0)]
+    data = random.Random(setup.seed).randbytes(size)
+    tag = f"{setup.sender}-{setup.receiver}-{setup.rate}-{setup.seed}-{setup.window}-{setting[:4]}"
+    row: dict[str, object] = {
+        "rate": setup.rate,
+        "pair": f"{setup.sender}->{setup.receiver}",
+        "setting": setting,
+        "seed": setup.seed,
+        "bytes": size,
+    }
+    try:
+        result = _one(setup, data, workdir, tag)
+    except (RuntimeError, AssertionError) as exc:
+        return {**row, "ok": False, "error": str(exc)[:300]}
+    assert setup.rate is not None
+    line_Bps = setup.rate / 10
+    row.update(ok=True, seconds=round(result.seconds, 1))
+    row["line_share"] = round(size / result.seconds / line_Bps, 3)
+    if result.ours is not None:
+        st = result.ours
+        row["ours"] = {
+            "window": st.window,
+            "packet_length": st.packet_length,
+            "data_packet_length": st.data_packet_length,
+            "retransmissions": st.retransmissions,
+            "timeouts": st.timeouts,
+            "naks_sent": st.naks_sent,
+            "naks_received": st.naks_received,
+        }
+    return row
+
+
+def run_kermit_table(seeds: Sequence[int] = (1, 2, 3)) -> dict[str, object]:
+    """``linksim bench kermit --table``: issue 23's line x defaults vs hand-tuned C-Kermit.
+
+    Through the relay at 1.3 s one way and a byte error rate of 1e-3 (each
+    direction), 8192 bytes at 2400 bit/s and 32768 at 9600, random binary,
+    for each seed: our defaults sending to C-Kermit's defaults, C-Kermit's
+    defaults sending to our defaults (only what our receiver offers is ours
+    there), and C-Kermit to C-Kermit hand-tuned (250-character packets,
+    windows 8 and 16, block check 3, a fixed 10 s timeout, 20 retries).
+    ``line_share`` is the file size over the time from starting the sender
+    to the receiver's exit, over the line's bytes a second (bit/s / 10).
+    The transfers run in parallel; each is real time (a few minutes).
+    """
+    setups = _table_setups(seeds)
+    with tempfile.TemporaryDirectory(prefix="bench-kermit-table-") as tmp:
+        workdir = pathlib.Path(tmp)
+        with ThreadPoolExecutor(max_workers=_TABLE_PARALLEL) as pool:
+            rows = list(pool.map(lambda r: _table_row(r[0], r[1], workdir), setups))
+    return {
+        "benchmark": "kermit-table",
+        "delay": TABLE_DELAY,
+        "byte_error_rate": TABLE_BER,
+        "lines": [{"rate": r, "bytes": b} for r, b in TABLE_LINES],
+        "rows": rows,
     }

@@ -45,7 +45,7 @@ _BITS_PER_CHAR = 10
 """Start bit, 8 data bits, stop bit."""
 _ACK_CHARS = 12
 """A long ACK with a CRC and EOL, padding aside: the reverse traffic per D packet."""
-_TIMER_MARGIN = 1.0
+TIMER_MARGIN = 1.0
 """Seconds added to every line-derived timeout: process start-up, scheduling, a pty's buffering."""
 MIN_TIMEOUT = 2.0
 """The shortest timeout ever used, s (C-Kermit's dynamic timers stop at 1 s; a pty relay
@@ -63,6 +63,12 @@ which no Kermit can read (ckwin #559).  Asking for at most 89 keeps its packets
 legal; our parser accepts the extra characters (see _PARSER_SLACK)."""
 MAX_KERMIT_WINDOW = 31
 """The window field is one tochar; 31 is the protocol's limit (E-Kermit P_WSLOTS, ckcker.h)."""
+TIMER_WINDOW = 8
+"""Packets the timers assume may be queued ahead of a resent one before anything is
+measured.  The window offered is larger (31: a paced sender only fills it to cover
+repairs, see _sender.py), but a peer that does not pace rarely queues more than
+this, and a whole window of long packets at 2400 bit/s would make the first
+timeout minutes long."""
 
 
 def line_time(chars: int, rate: int | None) -> float:
@@ -73,13 +79,14 @@ def line_time(chars: int, rate: int | None) -> float:
 def line_timeout(delay: float, rate: int | None, window: int, length: int) -> float:
     """The timeout a line of this delay and rate needs, before anything is measured.
 
-    A resent packet may queue behind a whole window of packets already handed
-    to the port, and its ACK comes back through the delay: one round trip plus
-    the line time of ``window`` packets of ``length`` characters and their
-    ACKs, plus :data:`_TIMER_MARGIN`; never below :data:`MIN_TIMEOUT`.
+    A resent packet may queue behind a window of packets already handed to
+    the port, and its ACK comes back through the delay: one round trip plus
+    the line time of ``window`` (at most :data:`TIMER_WINDOW`) packets of
+    ``length`` characters and their ACKs, plus :data:`TIMER_MARGIN`; never
+    below :data:`MIN_TIMEOUT`.
     """
-    busy = line_time(window * (length + _ACK_CHARS), rate)
-    return max(MIN_TIMEOUT, 2 * delay + busy + _TIMER_MARGIN)
+    busy = line_time(min(window, TIMER_WINDOW) * (length + _ACK_CHARS), rate)
+    return max(MIN_TIMEOUT, 2 * delay + busy + TIMER_MARGIN)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -90,7 +97,12 @@ class KermitConfig:
         max_packet_length: longest packet we receive and send, MARK through
             CHECK (the package's length convention).  96 or less means normal
             packets only; more offers long packets (MAXLX = length - 7).
-        window: sliding-window slots we offer, 1..31.
+        window: sliding-window slots we offer, 1..31 (default 31, the most
+            Kermit allows; C-Kermit offers 30).  A sender that knows the
+            line rate paces its packets at that rate, so a large window only
+            lets it keep sending while a damaged packet is repaired (see
+            :class:`~serialsocket.kermit.KermitSender`); it does not queue a
+            window of packets at the port.
         check: block check we ask for after the Send-Init exchange (type 1, 2
             or 3; both sides must ask for the same, else type 1 is used).
         timeout: fixed local timeout in seconds, or None for timers derived
@@ -135,7 +147,7 @@ class KermitConfig:
     """
 
     max_packet_length: int = 1000
-    window: int = 8
+    window: int = MAX_KERMIT_WINDOW
     check: BlockCheck = BlockCheck.CRC16
     timeout: float | None = None
     retry_limit: int = 10

@@ -27,14 +27,20 @@ from ._core import (
     OutgoingFile,
     TransferComplete,
 )
-from ._params import INIT_TIMEOUT, MIN_TIMEOUT, KermitConfig, line_time, line_timeout
+from ._params import (
+    INIT_TIMEOUT,
+    MIN_TIMEOUT,
+    TIMER_MARGIN,
+    KermitConfig,
+    line_time,
+    line_timeout,
+)
 from ._window import SendSlot, SendWindow
 
 _MIN_DYNAMIC_LENGTH = MAX_NORMAL_LEN + 2
 """96: the dynamic length never goes below a normal packet."""
-_PACKET_OVERHEAD = 20
-"""Characters each D packet costs besides its data: 11 of framing, and its share
-of the ACK coming back (the model of :meth:`KermitSender._choose_length`)."""
+_ACK_CHARS = 12
+"""Line characters of an ACK, for the model's cycle (a long-packet ACK with a CRC and EOL)."""
 _PRIOR_CHARS = 2000.0
 _PRIOR_ERRORS = 0.5
 """Before anything is measured the error estimate is 0.5 errors in 2000
@@ -53,6 +59,18 @@ _MAX_BACKOFF = 8
 log = logging.getLogger(__name__)
 
 __all__ = ["KermitSender"]
+
+
+def _goodput(length: int, data: int, whole: float, cps: float, rtt: float, window: int) -> float:
+    """Data characters a second for ``length``-character packets (the model of
+    :meth:`KermitSender._choose_length`): ``data`` characters of each are data,
+    ``whole`` is the chance one arrives undamaged, ``cps`` the line's
+    characters a second, ``rtt`` the round trip, ``window`` the slots."""
+    sent = length / cps
+    cycle = rtt + sent + _ACK_CHARS / cps
+    covered = int(window * sent / cycle)  # attempts at window-low the window rides out
+    stall = (1 - whole) ** covered * cycle
+    return min(data / (sent / whole + stall), window * data * whole / cycle)
 
 
 class KermitSender(KermitSide):
@@ -87,6 +105,9 @@ class KermitSender(KermitSide):
         self._refusal: str | None = None
         self._refill_at: float | None = None  # streaming: when to queue more D
         self._streamed = 0  # streaming: file bytes sent, confirmed by the ACK of Z
+        self._line_free = 0.0  # pacing: when the line will have sent all we wrote
+        self._progress_at = now  # the latest ACK that acknowledged something
+        self._last_resend_at = -math.inf
         self._send(PacketType.SEND_INIT, self._mine.encode(), now, init=True)
 
     def _error_seq(self) -> int:
@@ -102,18 +123,38 @@ class KermitSender(KermitSide):
         self._seq = (seq + 1) % SEQ_MODULUS
         self._transmissions += 1
         wire = self._emit(Packet(seq=seq, type=ptype, data=data), init=init)
+        self._on_line(len(wire), now)
         if ptype == PacketType.DATA:
             self._d_chars += len(wire)
         self._window.push(seq, wire, self._transmissions, file_bytes, sent_at=now, ptype=str(ptype))
-        self._deadline = now + self._timeout()
+        self._arm(now)
+
+    def _arm(self, now: float) -> None:
+        """Run the retransmission timer from window-low's latest copy, or the last progress.
+
+        Not from the latest packet sent: a paced sender sends new D packets
+        all the time, and a timer pushed back by each would let a window-low
+        whose resend was lost wait until the window is full and then a whole
+        timeout more (C-Kermit NAKs a gap once and holds back the ACKs behind
+        it, so nothing else repairs it: at 9600 bit/s, 0.2 s and 1e-3 that was
+        5.4 s instead of 2).  An ACK restarts it (TCP's rule), so a burst of
+        ACKs held back behind a repaired gap does not time out the packets
+        it is about to acknowledge.
+        """
+        oldest = self._window.oldest()
+        start = now
+        if oldest is not None:
+            copy = oldest.resent_at if oldest.resent_at is not None else oldest.sent_at
+            start = max(copy, self._progress_at)
+        self._deadline = start + self._timeout()
 
     # -- timers and packet length ------------------------------------------------
 
     def _timeout(self) -> float:
         """Line-derived until round trips are measured, then RFC 6298's, with backoff.
 
-        Never below the line's own floor (one round trip of the configured
-        delay plus one packet and its ACK), nor :data:`MIN_TIMEOUT`.
+        Never below the line's own floor (the round trip, two packets and an
+        ACK on the line, and a margin), nor :data:`MIN_TIMEOUT`.
         """
         config = self.config
         if config.timeout is not None:
@@ -125,13 +166,24 @@ class KermitSender(KermitSide):
         if self._srtt is None:
             base = line_timeout(config.delay, config.rate, neg.window, length)
         else:
-            floor = 2 * config.delay + line_time(length + 12, config.rate)
+            # The path (the configured delay's round trip, or the shortest
+            # measured), a packet paced ahead of the resent one, the resent
+            # one, its ACK, and the margin for scheduling: an RTO just above
+            # the round trip fired before the ACK of a repair could come back
+            # (9600 bit/s, 1.3 s, 1e-3: 13-17 timeouts in 32 KiB, mostly early).
+            path = max(2 * config.delay, self._min_rtt or 0.0)
+            floor = path + line_time(2 * length + _ACK_CHARS, config.rate) + TIMER_MARGIN
             base = max(MIN_TIMEOUT, floor, self._srtt + 4 * self._rttvar)
         return base * self._backoff
 
     def _measure(self, slot: SendSlot, now: float) -> None:
-        """A round-trip sample from a packet sent once (Karn's rule)."""
-        if slot.retries:
+        """A round-trip sample from a packet sent once (Karn's rule).
+
+        Nor from a packet sent before the latest resend: its ACK may have been
+        held back until the gap was repaired (C-Kermit's receiver does that),
+        which measures the repair, not the path.
+        """
+        if slot.retries or slot.sent_at <= self._last_resend_at:
             return
         sample = max(now - slot.sent_at, 0.0)
         if self._min_rtt is None or sample < self._min_rtt:
@@ -147,41 +199,52 @@ class KermitSender(KermitSide):
             return 96
         return self._length or self._neg.send_max_length
 
-    def _in_flight_cap(self) -> float:
-        """Line characters worth having unacknowledged at once, when the rate is known.
+    def _paced(self) -> bool:
+        """D packets leave at the line rate: the rate is known and something can be lost."""
+        return self.config.rate is not None and not self._streaming()
 
-        A round trip's worth at the line rate (the bandwidth-delay product)
-        keeps the line busy, plus half again and a packet for slack; more only
-        queues at the port, and a resent packet waits behind that queue (at
-        2400 bit/s eight 250-character packets are 8 s).  Without ``rate`` the
-        window alone bounds it.
+    def _next_data_at(self) -> float:
+        """Pacing: when a new D packet may go -- at most one packet still ahead of it.
+
+        The port (a UART, a pty into a relay) drains at the line rate and
+        whatever is written beyond that waits in its queue; a packet resent
+        after a NAK would wait there behind every new packet already handed
+        over (at 2400 bit/s eight 250-character packets are 8 s).  Writing new
+        packets only as fast as the line takes them keeps that queue at one
+        packet, so a resend goes out next -- and the window can then be as
+        large as a repair needs without queueing a window of packets.
         """
-        rate = self.config.rate
-        if rate is None:
-            return math.inf
-        packet = self._length + 12
-        rtt = max(2 * self.config.delay, self._min_rtt or 0.0)
-        return max(2 * packet, 1.5 * rtt / line_time(1, rate) + packet)
+        if not self._paced():
+            return -math.inf
+        return self._line_free - line_time(self._length, self.config.rate)
+
+    def _on_line(self, chars: int, now: float) -> None:
+        """Account ``chars`` characters written now: the line is busy until ``_line_free``."""
+        if self.config.rate is not None:
+            self._line_free = max(self._line_free, now) + line_time(chars, self.config.rate)
 
     def _choose_length(self) -> int:
-        """The D packet length with the best expected goodput on this line.
+        """The D packet length with the best expected goodput on this line and window.
 
-        Model: a packet of L characters arrives whole with probability
-        (1 - p)^L, p being the measured per-character error rate (resent D
-        packets over D characters sent, with a small prior); goodput is
-        that times the data share (L - overhead) / L times the rate the
-        window allows -- the line rate, or a window of packets per round
-        trip when the round trip is longer (the configured delay, or the
-        shortest one measured: longer samples include the queue the window
-        itself builds at the port, which a longer packet would only lengthen).
-        Lengths damaged more than one time in three are avoided: with ten
-        retries, a packet then fails all of them about once in 10^5.
-        Candidates run from 96 to the negotiated maximum.
-
-        (A model that also charged each damaged packet the window's stall
-        during its repair chose longer packets -- 222 characters instead of
-        126 at 2400 bit/s and 1e-3 -- and was slower against C-Kermit through
-        the relay: 149 s and 192 s against 128 s and 130 s.)
+        With a per-character error rate p (resent D packets over D characters
+        sent, with a small prior), a packet of L characters arrives whole with
+        probability w = (1 - p)^L, and a damaged one costs its line time again,
+        so a paced sender moves ``data(L) / (t(L) / w)`` characters a second,
+        data(L) being the data field of an L-character packet and t(L) its
+        line time.  That holds only while the window keeps the line busy
+        through a repair: one attempt of window-low takes a cycle c = the
+        round trip + t(L) + an ACK's line time, and a window of W packets
+        covers k = floor(W t(L) / c) attempts; a packet that needs more than k
+        (probability (1 - w)^k) stalls the line for about a cycle, and with
+        k = 0 the window limits the rate to W data(L) w / c even without
+        errors.  The best L trades the header's share (short packets) against
+        damage (long ones) and against the window's reach (at 9600 bit/s and
+        1.3 s one way 30 short packets do not cover two round trips).  The
+        round trip is ``--delay``'s, or the shortest one measured (longer
+        samples include queueing).  Lengths damaged more than one time in
+        three are avoided: with ten retries a packet then fails all of them
+        about once in 10^5.  Candidates run from 96 to the negotiated maximum
+        in 15 % steps.
         """
         neg = self._neg
         assert neg is not None
@@ -197,8 +260,7 @@ class KermitSender(KermitSide):
             n = min(int(length), top)
             whole = math.exp(n * math.log1p(-p))
             if 1 - whole <= _MAX_DAMAGED or n == _MIN_DYNAMIC_LENGTH:
-                window_cps = neg.window * n / (rtt + n / cps) if rtt > 0 else cps
-                rate = whole * (n - _PACKET_OVERHEAD) / n * min(cps, window_cps)
+                rate = _goodput(n, data_capacity(n, neg.check), whole, cps, rtt, neg.window)
                 if rate > best_rate:
                     best, best_rate = n, rate
             if n >= top:
@@ -222,17 +284,21 @@ class KermitSender(KermitSide):
                     # waiting out the timer.
                     self._retransmit(oldest, now)
                 return  # otherwise an old duplicate ACK
-            oldest = window.oldest()
+            lost = [s for s in window.unacked() if s is not slot and s.last_sent < slot.first_sent]
             self._measure(slot, now)
             window.ack(packet.seq)
             self._backoff = 1
-            self._deadline = now + self._timeout()
-            if oldest is not None and slot.first_sent > oldest.last_sent:
-                # Every copy of the packet just ACKed left after window-low's
-                # last copy, and the line keeps order: that copy or its ACK
-                # was lost (see the module doc).  A receiver NAKs a gap only
-                # once, so without this a second loss waits out the timer.
-                self._retransmit(oldest, now)
+            self._progress_at = now
+            self._arm(now)
+            for older in lost:
+                # Every copy of the packet just ACKed left after the latest
+                # copy of ``older``, and the line keeps order: that copy or
+                # its ACK was lost (see the module doc).  A receiver NAKs a
+                # gap only once, so without this a second loss -- of any
+                # packet in the window, not only window-low -- waits out the
+                # timer (at 9600 bit/s, 1.3 s and 1e-3, four timeouts in a
+                # 32 KiB transfer when only window-low was resent).
+                self._retransmit(older, now)
                 if self.finished:
                     return
             self._after_ack(packet, now)
@@ -246,11 +312,13 @@ class KermitSender(KermitSide):
             if self._state is KermitState.SEND_INIT:
                 self._retransmit_oldest(now)  # even NAK(1): the ACK of S carries parameters
             elif slot is not None and not slot.acked:
-                self._retransmit(slot, now)
+                if not self._nak_predates_copy(slot, now):
+                    self._retransmit(slot, now)
             elif packet.seq == self._seq and window.size == 1:
                 # Stop-and-wait only: NAK(n+1) = ACK(n) (Kermit protocol manual).
                 window.ack_all()
-                self._deadline = now + self._timeout()
+                self._progress_at = now
+                self._arm(now)
                 self._after_ack(None, now)
             elif packet.seq == self._seq:
                 # With windows a NAK acknowledges nothing: C-Kermit NAKs ahead
@@ -262,6 +330,21 @@ class KermitSender(KermitSide):
             # Any other NAK names a packet already acknowledged or outside the
             # window (a late copy): it acknowledges nothing and asks for nothing.
         # Anything else from a receiver (echoes, stray types) is ignored, as ckcfn2.c does.
+
+    def _nak_predates_copy(self, slot: SendSlot, now: float) -> bool:
+        """A NAK that left the receiver before the latest copy of ``slot`` could arrive.
+
+        The shortest round trip (measured, else the configured delay's) has
+        not passed since that copy went out, so the NAK is about an earlier
+        copy, already repaired by this one: a receiver that NAKs window-low
+        again on every damaged packet (ours; our own measurement at 9600
+        bit/s, 1.3 s, 1e-3: 97 NAKs for 64 damaged packets) would otherwise
+        have each repair sent twice or more.
+        """
+        if slot.resent_at is None:
+            return False
+        rtt = self._min_rtt if self._min_rtt is not None else 2 * self.config.delay
+        return now - slot.resent_at < rtt
 
     def _after_ack(self, ack: Packet | None, now: float) -> None:
         """The window moved: take the next step of the batch."""
@@ -473,10 +556,11 @@ class KermitSender(KermitSide):
         if self._streaming():
             self._stream(now, capacity)
             return
-        cap = self._in_flight_cap()
-        while (
-            not self._window.full and not self._discard and self._window.outstanding_chars() < cap
-        ):
+        while not self._window.full and not self._discard:
+            send_at = self._next_data_at()
+            if now < send_at:
+                self._refill_at = send_at  # paced: come back when the line has room
+                break
             if len(self._pending) < capacity and not self._eof:
                 chunk = self._file.source.read(capacity * _READ_AHEAD)
                 if chunk:
@@ -522,7 +606,7 @@ class KermitSender(KermitSide):
     def _retransmit_oldest(self, now: float) -> None:
         slot = self._window.oldest()
         if slot is None:
-            self._deadline = now + self._timeout()
+            self._arm(now)
         else:
             self._retransmit(slot, now)
 
@@ -540,5 +624,8 @@ class KermitSender(KermitSide):
         slot.retries += 1
         self._transmissions += 1
         slot.last_sent = self._transmissions
+        slot.resent_at = now
+        self._last_resend_at = now
         self._resend(slot.wire)
-        self._deadline = now + self._timeout()
+        self._on_line(len(slot.wire), now)
+        self._arm(now)

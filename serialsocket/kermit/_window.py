@@ -36,6 +36,7 @@ class SendSlot:
         sent_at: when its first copy was handed out (for round-trip samples:
             only packets sent once are measured, Karn's rule).
         ptype: its type letter (for error messages).
+        resent_at: when its latest copy was resent (None: sent once).
     """
 
     seq: int
@@ -47,6 +48,7 @@ class SendSlot:
     file_bytes: int = 0
     sent_at: float = 0.0
     ptype: str = "D"
+    resent_at: float | None = None
 
 
 class SendWindow:
@@ -92,6 +94,10 @@ class SendWindow:
     def get(self, seq: int) -> SendSlot | None:
         """The outstanding slot with this sequence number, if any."""
         return self._slots.get(seq)
+
+    def unacked(self) -> list[SendSlot]:
+        """The outstanding slots not acknowledged yet, oldest first."""
+        return [slot for slot in self._slots.values() if not slot.acked]
 
     def oldest(self) -> SendSlot | None:
         """The oldest unacknowledged slot (window-low), if any."""

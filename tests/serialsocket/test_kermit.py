@@ -42,11 +42,11 @@ Side = KermitSender | KermitReceiver
 
 
 def test_our_send_init_field_is_exact() -> None:
-    # MAXL 89 'y', TIME 9 (a window of 8 x 1000 characters at an assumed
-    # 9600 bit/s, 8.4 s, plus 1 s), no padding, EOL CR, '#', QBIN Y, CHKT 3,
-    # REPT '~', CAPAS 2|4|8|16 '>', WINDO 8 '(', MAXLX 993 = 10*95+43 '*K',
-    # CHKPNT 0, CHKINT ___, WHATAMI tochar(32|2) 'B'.
-    assert KermitInit.mine(KermitConfig()).encode() == b"y) @-#Y3~>(*K0___B"
+    # MAXL 89 'y', TIME 9 (the timers assume 8 x 1000 characters queued at an
+    # assumed 9600 bit/s, 8.4 s, plus 1 s), no padding, EOL CR, '#', QBIN Y,
+    # CHKT 3, REPT '~', CAPAS 2|4|8|16 '>', WINDO 31 '?', MAXLX 993 = 10*95+43
+    # '*K', CHKPNT 0, CHKINT ___, WHATAMI tochar(32|2) 'B'.
+    assert KermitInit.mine(KermitConfig()).encode() == b"y) @-#Y3~>?*K0___B"
 
 
 def test_seven_bit_normal_packets_field() -> None:

@@ -201,8 +201,10 @@ def test_the_timeout_backs_off_and_follows_measured_round_trips() -> None:
     assert sender.statistics().timeout == pytest.approx(2.0)  # the line's, window 1: the floor
     sender.data_to_send()  # F at 6.0
     sender.receive_data(_packet(1, "Y"), 6.4)  # sample 0.4 s
-    # RFC 6298 first sample: srtt 0.4, rttvar 0.2 -> 1.2, below the 2 s floor.
-    assert sender.statistics().timeout == pytest.approx(2.0)
+    # RFC 6298 first sample: srtt 0.4, rttvar 0.2 -> 1.2, below the line's floor:
+    # the shortest round trip 0.4 s, two 1000-character packets and an ACK at
+    # the assumed 9600 bit/s (2012 / 960 s), and the 1 s margin.
+    assert sender.statistics().timeout == pytest.approx(0.4 + 2012 / 960 + 1.0)
     sender.data_to_send()  # D at 6.4
     sender.receive_data(_packet(2, "Y"), 10.4)  # a slow one: 4 s
     # rttvar 0.2 + (|0.4-4| - 0.2)/4 = 1.05; srtt 0.4 + 3.6/8 = 0.85 -> 0.85 + 4.2
@@ -231,21 +233,31 @@ def test_defaults_survive_1e_3_with_shorter_packets(seed: int) -> None:
     receiver = KermitReceiver(config, 0.0)
     got, s_events, _, _ = _simulate(sender, receiver, delay=1.3, error=1e-3, seed=seed)
     assert got == data
-    assert s_events[-1] == TransferComplete()
+    # Complete; the ACK of B may be the one packet lost at the end (seed 3),
+    # which nothing can repair: break_acknowledged False, the file confirmed.
+    assert isinstance(s_events[-1], TransferComplete)
     length = sender.statistics().data_packet_length
     assert 200 <= length <= 500, length
 
 
-def test_fixed_1000_character_packets_fail_at_1e_3_where_the_defaults_do_not() -> None:
-    """The old default (always 1000) against the same four seeded lines."""
-    failed = []
+def test_fixed_1000_character_packets_are_slower_at_1e_3_than_the_defaults() -> None:
+    """The old default (always 1000) against the same four seeded lines: it
+    used to give up on one of them; since repairs go out as soon as an ACK
+    shows a loss, it completes, but each damaged 1000-character packet costs
+    its whole line time again, and it takes longer than the measured length
+    on every seed (virtual time: 150-201 s against 86-117 s)."""
     for seed in range(4):
         data = _payload(40_000, seed)
-        fixed = KermitConfig(delay=1.3, rate=9600, dynamic_length=False)
-        sender = KermitSender([OutgoingFile("a", len(data), io.BytesIO(data))], fixed, 0.0)
-        _simulate(sender, KermitReceiver(fixed, 0.0), delay=1.3, error=1e-3, seed=seed)
-        failed.append(sender.statistics().state.value == "failed")
-    assert failed == [False, False, True, False]  # gives up on one of the four
+        took = []
+        for dynamic in (True, False):
+            config = KermitConfig(delay=1.3, rate=9600, dynamic_length=dynamic)
+            sender = KermitSender([OutgoingFile("a", len(data), io.BytesIO(data))], config, 0.0)
+            got, _, _, t = _simulate(
+                sender, KermitReceiver(config, 0.0), delay=1.3, error=1e-3, seed=seed
+            )
+            assert got == data
+            took.append(t)
+        assert took[0] < took[1], (seed, took)
 
 
 # -- attribute packets -----------------------------------------------------------------
