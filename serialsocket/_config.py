@@ -349,15 +349,20 @@ class EndpointConfig:
     def needs_long_window(self) -> bool:
         """Whether a connector offers long sequence numbers (PROTOCOL.md
         section 9): only when they may be used (``long_window`` set, ``window``
-        31) and 31 packets of the derived length cannot keep the hinted line
-        busy through the repair of a loss -- on a shorter or slower line the
-        two characters they add to every packet would buy nothing.  A
-        listener agrees to a connector's offer."""
+        31) and the hints do not show that 31 packets of the derived length
+        keep the line busy through the repair of a loss -- on a short or slow
+        line the two characters they add to every packet would buy nothing.
+        Without a rate or a delay hint nothing shows it (the line may be a
+        20-minute one), so they are offered.  A listener agrees to a
+        connector's offer."""
         return (
             self.long_window is not None
             and self.window == MAX_WINDOW
-            and self.line_rate is not None
-            and not self._window_covers(self.derived_max_packet_length())
+            and (
+                self.line_rate is None
+                or self.one_way_delay == 0
+                or not self._window_covers(self.derived_max_packet_length())
+            )
         )
 
     def line_encoding(self) -> Encoding:

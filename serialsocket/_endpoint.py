@@ -218,7 +218,7 @@ class Endpoint:
     _init_transmissions: int
     _answer_sent_at: float
     _answers: int
-    _window_key: tuple[int, float | None, int] | None
+    _window_key: tuple[int, float | None, int, float | None] | None
     _window_cached: int
     _long_seq: bool
     _buffer_capped: bool
@@ -1298,7 +1298,7 @@ class Endpoint:
         return 2 * self._one_way() + self._tx(nak) - 2 * cr - TIME_EPSILON
 
     def _effective_window(self) -> int:
-        key = (self._sender.window, self._rtt.srtt, self._full_wire)
+        key = (self._sender.window, self._rtt.srtt, self._full_wire, self._rate.measured)
         if key != self._window_key:
             self._window_key = key
             self._window_cached = self._compute_effective_window()
@@ -1308,10 +1308,18 @@ class Endpoint:
         window = self._sender.window
         tx = self._tx(self._full_wire)
         if tx <= 0:
-            # Rate unknown: nothing says how much the line holds, so no more
-            # than the classic 31 packets go out unacknowledged, whatever
-            # long sequence numbers would allow.
-            return min(window, MAX_WINDOW)
+            # Rate unknown: nothing says how much the line holds.  With mod-64
+            # numbers, the classic 31 packets.  With long sequence numbers,
+            # slow start from there: twice what the line was measured to
+            # deliver in a round trip, so the window doubles each round trip
+            # until a queue forms and the busy run measures the rate (31
+            # packets never fill a 20-minute line, so without this the rate
+            # was never measured and 300 s one way ran at 0.02 of the line).
+            measured, srtt = self._rate.measured, self._rtt.srtt
+            if not self._long_seq or measured is None or srtt is None:
+                return min(window, MAX_WINDOW)
+            grown = math.ceil(2 * measured * srtt / self._full_wire) + 5
+            return max(1, min(window, max(MAX_WINDOW, grown)))
         rtt = max(self._rtt.srtt if self._rtt.srtt is not None else 0.0, self._min_rtt())
         # The window must outlast the repair of a loss, or the line idles.
         # Packet k (first sent from T - tx to T) is lost; the next packet's

@@ -121,8 +121,11 @@ def agreed_parameters(encoding: Encoding, max_len: int) -> Negotiated:
     """What two endpoints configured with this profile and maximum packet
     length agree on, from a real init exchange between two
     :class:`~serialsocket.Endpoint` objects (so the limit follows the
-    negotiation, dense encodings and CRC-32 included)."""
-    cfg = EndpointConfig(max_packet_length=max_len, encoding=encoding)
+    negotiation, dense encodings and CRC-32 included).  Without long
+    sequence numbers: the two characters they add to a data packet are a
+    cost of the protocol's choice, as its ACKs are, and the limit is the
+    same whatever the hints made the endpoints choose."""
+    cfg = EndpointConfig(max_packet_length=max_len, encoding=encoding, long_window=None)
     a, b = Endpoint(cfg), Endpoint(cfg)
     b.listen()
     a.connect(0.0)
@@ -143,16 +146,10 @@ def packet_sizes(payload: bytes, encoding: Encoding, max_len: int) -> tuple[floa
     """
     agreed = agreed_parameters(encoding, max_len)
     cap = data_capacity(max_len, agreed.check)
-    if agreed.long_seq:
-        cap -= 2  # the high sequence bits head every data field (PROTOCOL.md 9)
     fields = agreed.encoding.encode_fields(payload, cap, 1 << 30)
     full = fields[:-1] or fields
     carried = sum(used for _, used in full)
-    wire = sum(
-        len(build_packet(Packet(seq=0, type="D", data=f), agreed.check))
-        + (2 if agreed.long_seq else 0)
-        for f, _ in full
-    )
+    wire = sum(len(build_packet(Packet(seq=0, type="D", data=f), agreed.check)) for f, _ in full)
     return carried / len(full), wire / len(full)
 
 

@@ -104,8 +104,10 @@ def test_every_combination_agrees_on_what_section_10_says(
 
 
 def test_simultaneous_open_agrees_on_the_same_codec_and_check() -> None:
-    cfg_a = EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32)
-    cfg_b = EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN, xon_xoff=True)
+    cfg_a = EndpointConfig(
+        dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32
+    )
+    cfg_b = EndpointConfig(dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN, xon_xoff=True)
     a, b = Endpoint(cfg_a), Endpoint(cfg_b)
     a.connect(0.0)
     b.connect(0.0)
@@ -125,13 +127,19 @@ def test_simultaneous_open_agrees_on_the_same_codec_and_check() -> None:
 
 
 def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None:
-    a = Endpoint(EndpointConfig(dense=True))
+    a = Endpoint(EndpointConfig(dense=True, long_window=None))
     a.connect(0.0)
     field = _init_field(a, 0.0)
     assert field == b'~  @-#&5~&?!:0___@"TL@!  R&'  # PROTOCOL.md 10.1's example
     assert InitParameters.decode(field).features == FEATURE_ESCAPE | FEATURE_RADIX91
     b = Endpoint(
-        EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32, xon_xoff=True)
+        EndpointConfig(
+            dense=True,
+            long_window=None,
+            encoding=EIGHT_BIT_CLEAN,
+            check=BlockCheck.CRC32,
+            xon_xoff=True,
+        )
     )
     b.connect(0.0)
     field = _init_field(b, 0.0)
@@ -140,8 +148,8 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
 
 
 def test_a_request_without_xcapas_gets_exactly_the_classic_answer() -> None:
-    classic = EndpointConfig(dense=False)
-    for listener in (EndpointConfig(dense=True), classic):
+    classic = EndpointConfig(dense=False, long_window=None)
+    for listener in (EndpointConfig(dense=True, long_window=None), classic):
         a, b = Endpoint(classic), Endpoint(listener)
         b.listen()
         a.connect(0.0)
@@ -155,8 +163,12 @@ def test_a_request_without_xcapas_gets_exactly_the_classic_answer() -> None:
         assert b.parameters.encoding == PRINTABLE
         assert b.parameters.check is BlockCheck.CRC16
     # The dense listener's answer is byte for byte the classic listener's.
-    first = _answer(EndpointConfig(dense=False), EndpointConfig(dense=True))
-    second = _answer(EndpointConfig(dense=False), EndpointConfig(dense=False))
+    first = _answer(
+        EndpointConfig(dense=False, long_window=None), EndpointConfig(dense=True, long_window=None)
+    )
+    second = _answer(
+        EndpointConfig(dense=False, long_window=None), EndpointConfig(dense=False, long_window=None)
+    )
     assert first == second
 
 
@@ -244,7 +256,7 @@ def test_crc32_rule_follows_the_residual_error_target() -> None:
     assert crc32_wanted(128, byte_error_rate=1e-4)
     assert not crc32_wanted(4093, byte_error_rate=1e-6)
     for length, wanted in ((1024, False), (2048, True)):
-        ep = Endpoint(EndpointConfig(dense=True, max_packet_length=length))
+        ep = Endpoint(EndpointConfig(dense=True, long_window=None, max_packet_length=length))
         ep.connect(0.0)
         features = InitParameters.decode(_field_of_any(ep.data_to_send(0.0))).features
         assert features is not None
@@ -258,8 +270,8 @@ def _field_of_any(wire: bytes) -> bytes:
 
 def test_xon_xoff_is_escaped_when_either_side_declares_it() -> None:
     a, b = _handshake(
-        EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN),
-        EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN, xon_xoff=True),
+        EndpointConfig(dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN),
+        EndpointConfig(dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN, xon_xoff=True),
     )
     assert a.parameters is not None
     assert b.parameters is not None
@@ -278,8 +290,10 @@ def test_xon_xoff_is_escaped_when_either_side_declares_it() -> None:
 
 def test_a_crc32_packet_carries_six_check_characters_and_parses() -> None:
     a, b = _handshake(
-        EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32),
-        EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN),
+        EndpointConfig(
+            dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32
+        ),
+        EndpointConfig(dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN),
     )
     a.send(b"\x01\x18hello\x11\xff", 1.0)
     wire = a.data_to_send(1.0)
@@ -295,9 +309,9 @@ def test_a_crc32_packet_carries_six_check_characters_and_parses() -> None:
 # -- whole connections on virtual time --------------------------------------------------------
 
 CASES = {
-    "radix91": EndpointConfig(dense=True),
-    "radix91+crc32": EndpointConfig(dense=True, check=BlockCheck.CRC32),
-    "escape": EndpointConfig(dense=True, encoding=EIGHT_BIT_CLEAN),
+    "radix91": EndpointConfig(dense=True, long_window=None),
+    "radix91+crc32": EndpointConfig(dense=True, long_window=None, check=BlockCheck.CRC32),
+    "escape": EndpointConfig(dense=True, long_window=None, encoding=EIGHT_BIT_CLEAN),
     "escape+crc32+xonxoff": EndpointConfig(
         dense=True, encoding=EIGHT_BIT_CLEAN, check=BlockCheck.CRC32, xon_xoff=True
     ),
@@ -384,7 +398,8 @@ def test_a_malformed_dense_field_with_a_good_check_aborts_the_link_in_order(
     profile: Encoding, field: bytes
 ) -> None:
     _a, b = _handshake(
-        EndpointConfig(dense=True, encoding=profile), EndpointConfig(dense=True, encoding=profile)
+        EndpointConfig(dense=True, long_window=None, encoding=profile),
+        EndpointConfig(dense=True, long_window=None, encoding=profile),
     )
     b.events()
     forged = build_packet(Packet(seq=1, type=PacketType.DATA, data=field))

@@ -165,3 +165,26 @@ def test_a_listeners_seeded_round_trip_is_tightened_before_it_judges_speed() -> 
     assert est.init_rtt == pytest.approx(2.6)
     assert not est.fast_evidence(2.6, 0.05, 0.01)
     assert est.fast_evidence(2.0, 0.05, 0.01)  # now a real deficit counts
+
+
+def test_without_hints_a_20_second_line_is_filled_past_31_packets() -> None:
+    # Nothing says how long the line is, so the connector offers long sequence
+    # numbers, and with the rate unknown the window grows from what the line
+    # delivered (slow start) until a queue measures it.  60 KB at 2400 bit/s,
+    # 20 s one way, 1e-4: 569 s; with the classic 31 packets, 1486 s.
+    m = simulate(
+        PAYLOAD,
+        rate=RATE,
+        delay=20.0,
+        byte_error_rate=1e-4,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=3,
+        time_cap=20_000,
+        hints="none",
+    )
+    assert m.end == "complete"
+    assert m.long_sequence
+    assert m.seconds < 700
