@@ -520,6 +520,14 @@ class Endpoint:
         """Take the next pending event, or None."""
         return self._events.popleft() if self._events else None
 
+    @property
+    def dead_after(self) -> float:
+        """Seconds of silence after which the link is judged dead: configured
+        (``dead_after``), or derived from the measured round trip once there
+        is one (from the hints before).  A close that makes no progress for
+        this long is given up."""
+        return self._dead_after
+
     def statistics(self) -> EndpointStatistics:
         """A snapshot of counters, sequence variables and timers."""
         s, r, c = self._sender, self._receiver, self._counters

@@ -93,14 +93,15 @@ class AsyncioSerialSocket:
     cancelled ``wait_closed``/``aclose`` aborts.
     """
 
-    def __init__(self, driver: AsyncioDriver, *, close_timeout: float) -> None:
+    def __init__(self, driver: AsyncioDriver, *, close_timeout: float | None) -> None:
         self._d = driver
         self._generation = driver.generation
         self._reading = False
         self._eof_written = False
         self._closing: asyncio.Task[None] | None = None
         self.close_timeout = close_timeout
-        """Seconds a close may go without progress before it is given up."""
+        """Seconds a close may go without progress before it is given up; None:
+        the endpoint's dead-link interval, which follows the measured round trip."""
         self.close_error: str | None = None
         """After the close: None if the connection ended delivered (every byte
         we were given acknowledged by the peer and the peer's EOF received),
@@ -361,14 +362,16 @@ class AsyncioSerialSocket:
         """Before the endpoint's close: get what ``write`` buffered into the endpoint,
         giving up (abort) after ``close_timeout`` without progress."""
         d = self._d
+        # None: the endpoint's dead-link interval, which follows the measured round trip.
+        patience = d.ep.dead_after if self.close_timeout is None else self.close_timeout
         while d.outbox and d.ep.state is State.ESTABLISHED and d.broken is None:
             before = len(d.outbox)
             try:
-                async with asyncio.timeout(self.close_timeout):
+                async with asyncio.timeout(patience):
                     while len(d.outbox) == before and d.broken is None:
                         await d.changed()
             except TimeoutError:
-                self._abort_now(f"close made no progress for {self.close_timeout:.1f} s")
+                self._abort_now(f"close made no progress for {patience:.1f} s")
                 return
 
 
@@ -382,7 +385,7 @@ def _abort_text(exc: BaseException) -> str:
 class AsyncioSerialListener:
     """Accepts one connection at a time on a port; resets and listens after each."""
 
-    def __init__(self, driver: AsyncioDriver, *, close_timeout: float) -> None:
+    def __init__(self, driver: AsyncioDriver, *, close_timeout: float | None) -> None:
         self._d = driver
         self._close_timeout = close_timeout
         self._session: AsyncioSerialSocket | None = None
@@ -453,9 +456,11 @@ class AsyncioSerialListener:
         await self.aclose()
 
 
-def _close_timeout(config: EndpointConfig) -> float:
-    """How long a close may go without progress: a dead-link interval (from the physics)."""
-    return config.derived_dead_after()
+def _close_timeout(config: EndpointConfig) -> float | None:
+    """How long a close may go without progress: the configured dead-link
+    interval, else None -- the endpoint's own, measured when the close starts
+    (as :class:`serialsocket.SerialSocket` does)."""
+    return config.dead_after
 
 
 async def _port(port: PortLike, baud: int) -> tuple[AsyncPort, bool]:

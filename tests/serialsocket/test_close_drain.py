@@ -15,6 +15,7 @@ import trio
 import trio.testing
 
 from linksim import DirectionConfig, LinkConfig, endpoint_config_for, serial_socket_pair
+from serialsocket import EndpointConfig
 
 
 def _run(fn):  # type: ignore[no-untyped-def]
@@ -82,3 +83,33 @@ def test_a_close_with_no_progress_gives_up_and_says_so() -> None:
         "(may or may not have arrived), 0 never sent; "
         "received: 0 bytes from the peer, its EOF not received"
     )
+
+
+def test_without_hints_a_close_on_a_long_line_waits_by_the_measured_round_trip() -> None:
+    """The close's patience came from the hints (2 s without any), so on a
+    1.3 s line every close without hints gave up before an ACK could return:
+    ``serialsocket connect`` exited 1 with 0 of 8192 bytes acknowledged
+    through a relay at 2400 bit/s.  Now it is the endpoint's dead-link
+    interval, which follows the measured round trip."""
+    line = LinkConfig.symmetric(DirectionConfig(rate=2400, delay=1.3), seed=2)
+    data = random.Random(4).randbytes(8192)
+    got = bytearray()
+    outcome: dict[str, object] = {}
+
+    async def main() -> None:
+        async with serial_socket_pair(line, endpoint=EndpointConfig()) as (client, server):
+
+            async def read_all() -> None:
+                while chunk := await server.receive_some():
+                    got.extend(chunk)
+                await server.send_eof()
+
+            async with trio.open_nursery() as nursery:
+                nursery.start_soon(read_all)
+                await client.send_all(data)
+                await client.aclose()
+                outcome["error"] = client.close_error
+
+    _run(main)
+    assert bytes(got) == data
+    assert outcome["error"] is None
