@@ -1182,6 +1182,19 @@ class Endpoint:
             )
             return
         expired = self._sender.expired(now)
+        # RFC 6298 5.3: the timer restarts when an ACK moves the window.  A
+        # packet whose own timer ran out while the window's base kept moving
+        # is queued behind packets being delivered in order, not lost (a loss
+        # stops the base, and NAKs and fast retransmit repair what lies
+        # beyond it): re-arm it a timeout after that progress.  Without a
+        # rate to model the queue, 31 packets dumped on a 2400 bit/s line
+        # otherwise all timed out, and every resend deepened the queue
+        # (0.04 of the line, 15 000 timeouts, with no hints at 0 s delay).
+        hold = self._sender.base_advanced_at + self._rtt.timeout()
+        if hold > now:
+            for seq in expired:
+                self._sender.arm(self._sender.outstanding[seq], hold)
+            expired = []
         if expired:
             self._counters["timeouts"] += 1
             self._rtt.on_timeout()

@@ -32,6 +32,7 @@ packets acknowledged meanwhile lazily, when they reach its head.
 from __future__ import annotations
 
 import heapq
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -97,6 +98,8 @@ class Sender:
         self.bytes_acked = 0
         self.packets_acked = 0
         self.bytes_in_flight = 0
+        self.base_advanced_at = -math.inf
+        """When an ACK last moved the window's base: the line delivers in order."""
         self.delivered: list[Outstanding] = []
         """Packets whose only copy was acknowledged since the endpoint last
         took them (:meth:`take_delivered`): the ACK clock's samples."""
@@ -164,6 +167,7 @@ class Sender:
             now: arrival time.
         """
         samples: list[float] = []
+        base = self.base
         seq = self.resolve(seq_mod)
         if seq is not None:
             self._ack_one(seq, now, samples, own=True)
@@ -193,6 +197,8 @@ class Sender:
                     self.schedule(lost.seq)
                     self.fast_retransmit_count += 1
         self._slide()
+        if self.base > base:
+            self.base_advanced_at = now
         return samples
 
     def on_nak(self, seq_mod: int, now: float, min_rtt: float) -> None:

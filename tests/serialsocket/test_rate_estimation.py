@@ -188,3 +188,28 @@ def test_without_hints_a_20_second_line_is_filled_past_31_packets() -> None:
     assert m.end == "complete"
     assert m.long_sequence
     assert m.seconds < 700
+
+
+def test_without_hints_a_slow_short_line_is_not_a_timeout_storm() -> None:
+    # 2400 bit/s, no delay, no hints: 31 packets go out at once and queue at the
+    # line for 17 s while the round trip measured at connect is 0.4 s.  Each
+    # packet's own timer ran out while the ones ahead of it were being
+    # delivered, every resend deepened the queue, and the transfer crawled at
+    # 0.04 of the line with 15 000 timeouts.  The timer now restarts when an
+    # ACK moves the window (RFC 6298 5.3).
+    m = simulate(
+        PAYLOAD[:20_000],
+        rate=RATE,
+        delay=0.0,
+        byte_error_rate=0.0,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=3,
+        time_cap=2_000,
+        hints="none",
+    )
+    assert m.end == "complete"
+    assert m.timeouts <= 5
+    assert m.delivered / m.seconds > 0.9 * RATE / 10 * 0.5  # printable: 0.51 of the line
