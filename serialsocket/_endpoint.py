@@ -734,6 +734,13 @@ class Endpoint:
         self._last_heard = now
         self._init_deadline = math.inf
         self._rate.start(now, self._rtt.srtt if self._init_transmissions == 1 else None)
+        if not answer and self._init_transmissions > 1:
+            # A resent init's answer bounds the round trip from above only:
+            # the reference that judges later samples plausible, tightened
+            # before it is trusted.  Without one every sample passed, and a
+            # 0.02 s "round trip" on a 1.3 s line (an ACK timed from a pacer
+            # model running late) made the link dead after 2 s of silence.
+            self._rate.seed_base(now - self._first_init_at)
         if answer:
             self._answer_sent_at = now
             self._answers = 1

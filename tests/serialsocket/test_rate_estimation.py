@@ -213,3 +213,26 @@ def test_without_hints_a_slow_short_line_is_not_a_timeout_storm() -> None:
     assert m.end == "complete"
     assert m.timeouts <= 5
     assert m.delivered / m.seconds > 0.9 * RATE / 10 * 0.5  # printable: 0.51 of the line
+
+
+def test_a_connector_whose_init_was_resent_still_judges_samples_plausible() -> None:
+    # The answer came to a resent init: the round trip is only bounded.  That
+    # bound is the reference (loose, tightened by the first deliveries), so a
+    # sample far below it is the model's error, not the path: without a
+    # reference every sample passed, and a 0.02 s one on a 1.3 s line brought
+    # the dead-link verdict down to 2 s.
+    a, b = Endpoint(EndpointConfig()), Endpoint(EndpointConfig())
+    b.listen()
+    a.connect(0.0)
+    a.data_to_send(0.0)  # lost
+    resend = a.get_timer()
+    assert resend is not None
+    a.handle_timer(resend)
+    second = a.data_to_send(resend)
+    assert second
+    b.receive_data(second, resend + 1.3)
+    a.receive_data(b.data_to_send(resend + 1.3), resend + 2.6)
+    assert a.statistics().state == "established"
+    assert a._rate.init_rtt == pytest.approx(resend + 2.6)
+    assert not a._rate.plausible(0.02)
+    assert a._rate.plausible(2.6)
