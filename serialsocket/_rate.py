@@ -156,8 +156,8 @@ class RateEstimator:
         self._run: tuple[float, int, int] | None = None
         self._reverse_at = -math.inf
         self._loose = 0
-        """Deliveries left before a listener's seeded :attr:`init_rtt` is
-        trusted as the reference of :meth:`fast_evidence` (0: trusted)."""
+        """Deliveries left before a seeded :attr:`init_rtt` is trusted as the
+        reference of :meth:`fast_evidence` (0: trusted; -1: never)."""
 
     # -- what the endpoint tells us --------------------------------------------------
 
@@ -175,9 +175,15 @@ class RateEstimator:
         if base_rtt is not None:
             self.base_rtt = self.init_rtt = base_rtt
 
-    def seed_base(self, upper_bound: float) -> None:
-        """A listener's first round trip, from its init answer to the
-        connector's next packet: an upper bound of the base round trip."""
+    def seed_base(self, upper_bound: float, *, trusted_later: bool = True) -> None:
+        """An upper bound of the base round trip: a listener's, from its init
+        answer to the connector's next packet, or a connector's whose init was
+        resent (from its first copy).  ``trusted_later`` False: the bound only
+        judges samples plausible and never becomes the reference of
+        :meth:`fast_evidence` (a connector's first deliveries wait in the
+        queue its first window built, so they cannot tighten it: seeded 0.65 s
+        long at 2400 bit/s and 1.3 s, it ramped the rate up every few round
+        trips and ended in a timeout storm)."""
         if self.init_rtt is None:
             # Only a bound: the connector may have sent its first packet a
             # while after our answer arrived.  A reference too long would
@@ -185,7 +191,7 @@ class RateEstimator:
             # server seeded 0.27 s long paced at 8 times a 9600 bit/s line),
             # so the first deliveries tighten it before it is trusted.
             self.init_rtt = upper_bound
-            self._loose = LOOSE_SEED_DELIVERIES
+            self._loose = LOOSE_SEED_DELIVERIES if trusted_later else -1
         if self.base_rtt is None:
             self.base_rtt = upper_bound
 
@@ -291,7 +297,8 @@ class RateEstimator:
         tainted = self._reverse_at > mark.point_time
         if self._loose and not fast and not tainted and self.init_rtt is not None:
             self.init_rtt = min(self.init_rtt, rtt)
-            self._loose -= 1
+            if self._loose > 0:
+                self._loose -= 1
         if tainted:
             self._run = None
             self._last_queued = False

@@ -236,3 +236,23 @@ def test_a_connector_whose_init_was_resent_still_judges_samples_plausible() -> N
     assert a._rate.init_rtt == pytest.approx(resend + 2.6)
     assert not a._rate.plausible(0.02)
     assert a._rate.plausible(2.6)
+
+
+def test_a_connectors_bound_never_judges_speed() -> None:
+    # A connector's first deliveries wait in the queue its first window built,
+    # so they cannot tighten a bound from a resent init: trusted, it made
+    # ordinary samples look early, the rate ramped up every few round trips,
+    # and linksim bench goodput --rate 2400 --delay 1.3 --ber 1e-4 --hints
+    # none fell into a timeout storm (0.037 of the limit, 293 078 timeouts).
+    est = RateEstimator(960.0)
+    est.start(0.0, None)
+    est.seed_base(3.0, trusted_later=False)
+    for k in range(8):
+        est.hand(50)
+        mark = est.mark(10.0 * k)
+        assert mark is not None
+        est.on_delivery(mark, 10.0 * k + 2.9, 2.9, 2.9, fast=False)
+    assert est.init_rtt == pytest.approx(2.9)  # still tightened, for plausibility
+    assert not est.plausible(1.0)
+    assert not est.fast_evidence(2.0, 0.05, 0.01)
+    assert est.rate == 960.0
