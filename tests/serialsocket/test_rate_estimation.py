@@ -14,7 +14,7 @@ import random
 
 import pytest
 
-from linksim.bench._transfer import simulate
+from linksim.bench._transfer import Measurement, simulate
 from serialsocket import Endpoint, EndpointConfig
 from serialsocket._rate import RateEstimator
 from serialsocket.packets import PRINTABLE
@@ -26,20 +26,32 @@ RATE = 2400
 DELAY = 1.3
 
 
-def _run(hints: str) -> tuple[float, int]:
-    m = simulate(
-        PAYLOAD,
+def _simulate(
+    hints: str,
+    *,
+    payload: bytes = PAYLOAD,
+    delay: float = DELAY,
+    byte_error_rate: float = 1e-4,
+    time_cap: float = 20_000,
+) -> Measurement:
+    """PAYLOAD (or ``payload``) one way at RATE, seeded, the defaults otherwise."""
+    return simulate(
+        payload,
         rate=RATE,
-        delay=DELAY,
-        byte_error_rate=1e-4,
+        delay=delay,
+        byte_error_rate=byte_error_rate,
         burst=None,
         window=31,
         max_len=None,
         encoding=PRINTABLE,
         seed=3,
-        time_cap=20_000,
+        time_cap=time_cap,
         hints=hints,
     )
+
+
+def _run(hints: str) -> tuple[float, int]:
+    m = _simulate(hints)
     assert m.end == "complete"
     assert m.ok
     return m.delivered / m.seconds, m.timeouts
@@ -172,19 +184,7 @@ def test_without_hints_a_20_second_line_is_filled_past_31_packets() -> None:
     # numbers, and with the rate unknown the window grows from what the line
     # delivered (slow start) until a queue measures it.  60 KB at 2400 bit/s,
     # 20 s one way, 1e-4: 569 s; with the classic 31 packets, 1486 s.
-    m = simulate(
-        PAYLOAD,
-        rate=RATE,
-        delay=20.0,
-        byte_error_rate=1e-4,
-        burst=None,
-        window=31,
-        max_len=None,
-        encoding=PRINTABLE,
-        seed=3,
-        time_cap=20_000,
-        hints="none",
-    )
+    m = _simulate("none", delay=20.0)
     assert m.end == "complete"
     assert m.long_sequence
     assert m.seconds < 700
@@ -197,19 +197,7 @@ def test_without_hints_a_slow_short_line_is_not_a_timeout_storm() -> None:
     # delivered, every resend deepened the queue, and the transfer crawled at
     # 0.04 of the line with 15 000 timeouts.  The timer now restarts when an
     # ACK moves the window (RFC 6298 5.3).
-    m = simulate(
-        PAYLOAD[:20_000],
-        rate=RATE,
-        delay=0.0,
-        byte_error_rate=0.0,
-        burst=None,
-        window=31,
-        max_len=None,
-        encoding=PRINTABLE,
-        seed=3,
-        time_cap=2_000,
-        hints="none",
-    )
+    m = _simulate("none", payload=PAYLOAD[:20_000], delay=0.0, byte_error_rate=0.0, time_cap=2_000)
     assert m.end == "complete"
     assert m.timeouts <= 5
     assert m.delivered / m.seconds > 0.9 * RATE / 10 * 0.5  # printable: 0.51 of the line
