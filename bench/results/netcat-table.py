@@ -17,7 +17,9 @@ Wall-clock: the figures depend on the machine and its load.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import random
 import subprocess
 import sys
@@ -40,6 +42,20 @@ GUARD = 900.0
 
 def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "serialsocket", *args]
+
+
+def _wait_until_open(proc: subprocess.Popen[bytes], path: str) -> None:
+    """Return once ``proc`` has the tty ``path`` open (Linux's /proc), so the
+    clock starts with a listener that is there; bounded by GUARD."""
+    target = os.path.realpath(path)
+    deadline = time.monotonic() + GUARD
+    fds = Path(f"/proc/{proc.pid}/fd")
+    while time.monotonic() < deadline and proc.poll() is None:
+        with contextlib.suppress(OSError):
+            if any(os.path.realpath(fd) == target for fd in fds.iterdir()):
+                return
+        time.sleep(0.01)
+    raise RuntimeError(f"{proc.args!r} did not open {path}")
 
 
 def run_row(rate: int, delay: float, ber: float, profile: str, seed: int, hints: bool) -> dict:
@@ -93,7 +109,7 @@ def run_row(rate: int, delay: float, ber: float, profile: str, seed: int, hints:
                     stdout=sink,
                     stderr=subprocess.PIPE,
                 )
-                time.sleep(1.0)  # the listener opens its port
+                _wait_until_open(listener, paths["b"])
                 start = time.monotonic()
                 connect = subprocess.Popen(
                     _cli("connect", paths["a"], *options, "--stats", "--json"),

@@ -77,16 +77,22 @@ def _endpoints(line_rate: float | None) -> tuple[Endpoint, Endpoint, SimLink]:
     return a, b, link
 
 
-@pytest.mark.parametrize("hint", [None, RATE / 10, RATE * 10])
-def test_statistics_report_the_measured_rate(hint: float | None) -> None:
-    a, b, link = _endpoints(hint)
-    data = random.Random(5).randbytes(40_000)
+def _transfer(a: Endpoint, b: Endpoint, link: SimLink, data: bytes) -> bytes:
+    """Send ``data`` from a to b over ``link``, stepping until b has read it all."""
     sent = 0
     got = bytearray()
     while len(got) < len(data):
         sent += a.send(data[sent:], link.now)
         link.step()
         got += b.read(None, link.now)
+    return bytes(got)
+
+
+@pytest.mark.parametrize("hint", [None, RATE / 10, RATE * 10])
+def test_statistics_report_the_measured_rate(hint: float | None) -> None:
+    a, b, link = _endpoints(hint)
+    data = random.Random(5).randbytes(40_000)
+    got = _transfer(a, b, link, data)
     assert bytes(got) == data
     st = a.statistics()
     assert st.line_rate is not None
@@ -101,12 +107,7 @@ def test_statistics_report_the_measured_rate(hint: float | None) -> None:
 def test_an_exact_hint_is_never_moved() -> None:
     a, b, link = _endpoints(RATE)
     data = random.Random(6).randbytes(30_000)
-    sent = 0
-    got = bytearray()
-    while len(got) < len(data):
-        sent += a.send(data[sent:], link.now)
-        link.step()
-        got += b.read(None, link.now)
+    _transfer(a, b, link, data)
     assert a.statistics().line_rate == RATE
     assert a._rate.raises == a._rate.lowers == 0
 
