@@ -16,7 +16,7 @@ from ._checks import BlockCheck
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._packet import data_capacity
-from ._params import DENSE_FEATURES, FEATURE_XON_XOFF, MAX_LONG_WINDOW
+from ._params import DENSE_FEATURES, FEATURE_EXPEDITED, FEATURE_XON_XOFF, MAX_LONG_WINDOW
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
@@ -125,6 +125,12 @@ class EndpointConfig:
             ``serialsocket listen/connect`` netcat does; ``--no-dense`` there).
             False sends the classic init (no XCAPAS unless long sequence
             numbers are offered) and answers a request classically.
+        expedited: offer the expedited lane (XCAPAS bit 16, PROTOCOL.md
+            section 11): small urgent messages that overtake queued stream
+            data (:meth:`Endpoint.send_expedited`; tcpstream sends its
+            EMERGENCY_STOP there).  On by default; a telelink peer that
+            agrees makes the init one character longer (XCAPAS); False keeps
+            the classic init unless something else is offered.
         xon_xoff: the line uses software flow control: the escape code must
             escape XON/XOFF as well (declared in XCAPAS, bit 32).
         one_way_delay: a hint, where estimation starts: the link's one-way
@@ -194,6 +200,7 @@ class EndpointConfig:
     check: BlockCheck = BlockCheck.CRC16
     encoding: Encoding | None = None
     dense: bool = False
+    expedited: bool = True
     xon_xoff: bool = False
     one_way_delay: float = 0.0
     line_rate: float | None = None
@@ -385,9 +392,10 @@ class EndpointConfig:
     def init_features(self) -> int | None:
         """The XCAPAS feature bits this side offers besides long sequence
         numbers (PROTOCOL.md section 10), or None for the classic init."""
+        lane = FEATURE_EXPEDITED if self.expedited else 0
         if not self.dense:
-            return None
-        return DENSE_FEATURES | (FEATURE_XON_XOFF if self.xon_xoff else 0)
+            return lane or None
+        return DENSE_FEATURES | lane | (FEATURE_XON_XOFF if self.xon_xoff else 0)
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

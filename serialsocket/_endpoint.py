@@ -48,6 +48,14 @@ from ._events import (
     Event,
     LinkDead,
 )
+from ._expedited import (
+    EXPEDITED_MAX_BYTES,
+    EXPEDITED_WINDOW,
+    URGENT,
+    URGENT_ACK,
+    ExpeditedReceiver,
+    ExpeditedSender,
+)
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
 from ._params import (
@@ -177,6 +185,16 @@ class EndpointStatistics:
     queue_delay: float = 0.0
     """Seconds the latest acknowledged packet waited in a queue outside the
     endpoint (a tty buffer, a relay): 0 when pacing keeps the path empty."""
+    expedited: bool = False
+    """The expedited lane was negotiated (PROTOCOL.md section 11)."""
+    expedited_sent: int = 0
+    """Expedited messages given to :meth:`Endpoint.send_expedited`."""
+    expedited_received: int = 0
+    """Expedited messages delivered whole from the peer."""
+    expedited_unacknowledged: int = 0
+    """Expedited fragments sent and not yet acknowledged, plus messages waiting."""
+    expedited_refused: int = 0
+    """Expedited fragments not taken because the inbox was full (resent later)."""
 
 
 class Endpoint:
@@ -225,6 +243,8 @@ class Endpoint:
     _tune_at: float
     _tune_taken: int
     _answer_with: InitParameters | None
+    _xsend: ExpeditedSender
+    _xrecv: ExpeditedReceiver
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -371,6 +391,70 @@ class Endpoint:
         self._go(Trigger.RESET)
         self._reset_connection()
 
+    # -- public: the expedited lane -------------------------------------------------
+
+    @property
+    def expedited(self) -> bool:
+        """Both ends agreed on the expedited lane (PROTOCOL.md section 11)."""
+        return self._negotiated is not None and self._negotiated.expedited
+
+    def send_expedited(self, message: bytes | bytearray | memoryview, now: float) -> None:
+        """Send ``message`` ahead of every byte queued on the stream.
+
+        The message travels in packets of its own, handed to the line before
+        any paced data (behind only what the UART already holds), is
+        retransmitted until acknowledged like data, and is delivered to the
+        peer's :meth:`read_expedited` whole, exactly once, and in the order
+        of ``send_expedited`` calls -- but *not* ordered with the stream: it
+        overtakes bytes sent before it.  The stream's EOF and a graceful
+        close wait for it.
+
+        Raises:
+            LocalProtocolError: the lane was not negotiated (:attr:`expedited`
+                is False: the peer is a classic Kermit or an older telelink,
+                or either side has ``EndpointConfig.expedited`` off), the
+                connection is not established, or
+                :data:`~serialsocket._expedited.EXPEDITED_QUEUE` messages
+                already wait for the peer.
+            ValueError: ``message`` is empty, longer than
+                :data:`~serialsocket._expedited.EXPEDITED_MAX_BYTES`, or needs
+                more than :data:`~serialsocket._expedited.EXPEDITED_WINDOW`
+                packets at the negotiated packet length.
+        """
+        if self._state is not State.ESTABLISHED or not self.expedited:
+            raise LocalProtocolError(
+                "no expedited lane: the connection is "
+                f"{self._state.value}{'' if self.expedited else ' without one negotiated'}; "
+                "send it on the stream instead"
+            )
+        data = bytes(message)
+        if not 0 < len(data) <= EXPEDITED_MAX_BYTES:
+            raise ValueError(
+                f"an expedited message is 1..{EXPEDITED_MAX_BYTES} bytes, not {len(data)}"
+            )
+        cut = self._encoding.encode_fields(data, self._capacity - 1, EXPEDITED_WINDOW + 1)
+        if len(cut) > EXPEDITED_WINDOW or sum(used for _, used in cut) < len(data):
+            raise ValueError(
+                f"{len(data)} bytes need more than {EXPEDITED_WINDOW} packets at the "
+                f"negotiated packet length ({self._capacity} data characters each); "
+                "send less at once"
+            )
+        self._xsend.submit([f for f, _ in cut])
+
+    def read_expedited(self) -> bytes | None:
+        """The next expedited message from the peer, whole, or None."""
+        return self._xrecv.read()
+
+    @property
+    def expedited_readable(self) -> int:
+        """Expedited messages :meth:`read_expedited` would return now."""
+        return len(self._xrecv.inbox)
+
+    @property
+    def expedited_settled(self) -> bool:
+        """Every expedited message sent so far has been acknowledged."""
+        return self._xsend.idle
+
     # -- public: data -------------------------------------------------------------
 
     def read(self, max_bytes: int | None = None, now: float | None = None) -> bytes:
@@ -417,7 +501,7 @@ class Endpoint:
         lost): what "delivered" means for a close (RELIABILITY.md section 1).
         """
         s = self._sender
-        return not s.queue and s.bytes_in_flight == 0 and self._receiver.eof
+        return not s.queue and s.bytes_in_flight == 0 and self._receiver.eof and self._xsend.idle
 
     @property
     def at_eof(self) -> bool:
@@ -433,7 +517,7 @@ class Endpoint:
     def all_acknowledged(self) -> bool:
         """Everything queued so far has been sent and acknowledged."""
         s = self._sender
-        return not s.queue and s.base == s.next
+        return not s.queue and s.base == s.next and self._xsend.idle
 
     # -- public: the I/O side ---------------------------------------------------------
 
@@ -466,6 +550,7 @@ class Endpoint:
             self._account(wire, now)
         self._control.clear()
         if self._state is State.ESTABLISHED and self._negotiated is not None:
+            self._release_expedited(now, out)
             self._release_data(now, out)
         return b"".join(out)
 
@@ -480,9 +565,9 @@ class Endpoint:
                 times = [self._last_heard + self._dead_after, self._next_probe_time()]
                 if self._close_deadline < math.inf:
                     times.append(self._close_deadline)
-                deadline = self._sender.next_deadline()
-                if deadline is not None:
-                    times.append(deadline)
+                for deadline in (self._sender.next_deadline(), self._xsend.next_deadline()):
+                    if deadline is not None:
+                        times.append(deadline)
                 return min(times)
             case _:
                 return None
@@ -576,6 +661,11 @@ class Endpoint:
             long_sequence=self._long_seq,
             receive_buffer=r.receive_buffer,
             buffer_capped=self._buffer_capped,
+            expedited=self.expedited,
+            expedited_sent=self._xsend.messages_sent,
+            expedited_received=self._xrecv.messages_received,
+            expedited_unacknowledged=len(self._xsend.outstanding) + len(self._xsend.waiting),
+            expedited_refused=self._xrecv.refused,
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -601,6 +691,7 @@ class Endpoint:
         self._pacer.reset()
         self._rate = RateEstimator(self._rate_hint())
         self._pacer.paced = self._rate.rate is not None
+        self._pacer.tight = self._rate.rate is not None
         self._clock = 0.0
         self._last_heard = 0.0
         self._last_probe = -math.inf
@@ -627,6 +718,8 @@ class Endpoint:
         self._tune_at = -math.inf
         self._tune_taken = 0
         self._answer_with = None
+        self._xsend = ExpeditedSender()
+        self._xrecv = ExpeditedReceiver()
 
     def _go(self, trigger: Trigger) -> None:
         old = self._state
@@ -838,6 +931,12 @@ class Endpoint:
             if self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
                 self._rate.reverse(now)
                 self._on_data(split[0], split[1], ptype == PacketType.EOF, now)
+        elif ptype in (URGENT, URGENT_ACK) and self.expedited and self._state in CONNECTED:
+            if ptype == URGENT:
+                self._rate.reverse(now)
+                self._on_urgent(packet)
+            else:
+                self._on_urgent_ack(packet, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
 
@@ -980,6 +1079,10 @@ class Endpoint:
         """The rate in use or the path's base round trip moved: pacing, the
         timeout floor, the window bound and the receive buffer follow."""
         self._pacer.paced = self._rate.rate is not None
+        # The short UART queue only at the rate the user gave, while the ACK
+        # clock agrees with it (see Pacer.horizon): an estimate still moving
+        # needs the queue to see the line.
+        self._pacer.tight = self._rate.rate is not None and self._rate.rate == self._rate_hint()
         if self._negotiated is not None:
             agreed = self._negotiated
             self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
@@ -1039,6 +1142,39 @@ class Endpoint:
             self._events.append(EndOfStream())
         self._check_closed(now)
 
+    def _on_urgent(self, packet: Packet) -> None:
+        """An expedited fragment: ``tochar(more)`` then the encoded bytes."""
+        more = unchar(packet.data[0]) if packet.data else -1
+        if not 0 <= more < EXPEDITED_WINDOW:
+            self._counters["ignored_packets"] += 1  # a broken peer's: its check was good
+            return
+        kind, completed = self._xrecv.on_fragment(packet.seq, more, packet.data[1:])
+        for fields in completed:
+            message = self._encoding.decode_fields(fields)  # MalformedDataError: abort
+            if not self._receiver.discard:
+                self._xrecv.inbox.append(message)
+        if kind == "duplicate":
+            self._counters["duplicates_received"] += 1
+        elif kind == "outside":
+            self._counters["out_of_window"] += 1
+        if kind in ("new", "duplicate"):
+            self._control.append(
+                build_packet(
+                    Packet(
+                        seq=packet.seq,
+                        type=URGENT_ACK,
+                        data=bytes((tochar(self._xrecv.expected % 64),)),
+                    ),
+                    self._send_check,
+                )
+            )
+
+    def _on_urgent_ack(self, packet: Packet, now: float) -> None:
+        cumulative = unchar(packet.data[0]) % 64 if packet.data else None
+        if self._xsend.on_ack(packet.seq, cumulative):
+            self._counters["fast_retransmits"] += 1
+        self._check_closed(now)
+
     def _progress_mark(self) -> tuple[int, int]:
         """What a close's progress is measured by: our packets acknowledged
         (selectively too, EOF included) and the peer's packets received in order."""
@@ -1054,7 +1190,7 @@ class Endpoint:
             self._close_deadline = now + self._close_patience
 
     def _check_closed(self, now: float) -> None:
-        both_closed = self._sender.eof_acked and self._receiver.eof
+        both_closed = self._sender.eof_acked and self._receiver.eof and self._xsend.idle
         if both_closed and allowed(self._state, Trigger.BOTH_CLOSED):
             self._go(Trigger.BOTH_CLOSED)
             # The peer resends its EOF on its own, possibly backed-off, timer: stay
@@ -1114,6 +1250,24 @@ class Endpoint:
         if not wants:
             return None
         return self._pacer.wake()
+
+    def _release_expedited(self, now: float, out: list[bytes]) -> None:
+        """Expedited fragments go out at once, ahead of paced data: they wait
+        only behind what the UART already holds (the pacer keeps that under
+        two packets), and the pacer counts them so data waits behind them."""
+        timeout = self._rtt.timeout()
+        while (frag := self._xsend.pop_due()) is not None:
+            if not frag.wire:
+                head = bytes((tochar(frag.more),))
+                frag.wire = build_packet(
+                    Packet(seq=frag.seq % 64, type=URGENT, data=head + frag.field),
+                    self._send_check,
+                )
+            out.append(frag.wire)
+            if frag.transmissions:
+                self._counters["retransmissions"] += 1
+            done_at = self._account(frag.wire, now)
+            self._xsend.sent(frag, done_at, timeout, self._rtt.ceiling)
 
     def _release_data(self, now: float, out: list[bytes]) -> None:
         s = self._sender
@@ -1218,6 +1372,13 @@ class Endpoint:
                     )
                     return
                 self._sender.schedule(seq)
+        if self._xsend.expired(now):
+            self._counters["timeouts"] += 1
+            limit = self.config.max_retries
+            worst = max(f.transmissions for f in self._xsend.outstanding.values())
+            if limit is not None and worst > limit:
+                self._finish_abort("Too many retries (expedited)", by_peer=False, send=True)
+                return
         if now >= self._next_probe_time():
             self._last_probe = now
             self._queue_ack(self._receiver.last_in_order(), poll=True)

@@ -17,7 +17,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-__all__ = ["TIME_EPSILON", "Pacer"]
+__all__ = ["HORIZON_CAP", "TIME_EPSILON", "Pacer"]
+
+HORIZON_CAP = 0.1
+"""The most line time, in seconds, data may queue in the UART (see
+:meth:`Pacer.horizon`): with it an ACK or an expedited message waits behind
+at most the packet on the wire plus 0.1 s, where two 128-character packets
+at 2400 bit/s held it for up to 1.6 s."""
 
 TIME_EPSILON = 1e-9
 """Tolerance for comparing computed instants (far below any line's byte time)."""
@@ -40,6 +46,9 @@ class Pacer:
         self._transmit_time = transmit_time
         self.paced = paced
         self.full_packet = full_packet
+        self.tight = False
+        """Keep the queue to :data:`HORIZON_CAP` (see :meth:`horizon`); the
+        endpoint sets it while the rate in use is a confirmed one."""
         self.free_at: float | None = None
         """When the last byte handed to the line finishes leaving the UART
         (None before the first packet of a connection)."""
@@ -71,8 +80,21 @@ class Pacer:
             self.free_at = max(self.free_at - seconds, now)
 
     def horizon(self) -> float:
-        """Seconds of bytes allowed queued in the UART before data waits here."""
-        return 2 * self._transmit_time(self.full_packet)
+        """Seconds of bytes allowed queued in the UART before data waits here.
+
+        Two full packets; with :attr:`tight`, never more than
+        :data:`HORIZON_CAP`: on a slow line two packets are over a second,
+        and everything the endpoint sends ahead of data -- ACKs, NAKs,
+        expedited messages -- waits behind that much.  A tenth of a second
+        still covers any scheduling delay in handing the next packet over.
+        Only with a rate the line has confirmed: while the rate is being
+        measured, the second packet's queue is what lets the ACK clock see
+        the line's capacity (without it a low estimate paced the line below
+        its rate and never learned better: a third of the speed without
+        hints at 2400 bit/s and 1.3 s).
+        """
+        two = 2 * self._transmit_time(self.full_packet)
+        return min(two, HORIZON_CAP) if self.tight else two
 
     def has_room(self, now: float) -> bool:
         """Data may be handed to the line at ``now``."""

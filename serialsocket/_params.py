@@ -29,8 +29,8 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
  22   TIMEOUT    three base-95 chars: the initial timeout hint in milliseconds
  23   XCAPAS     tochar(extensions offered): 1 = long sequence numbers,
                  2 = dense escape code (8-bit line), 4 = dense radix-91
-                 packing (printable line), 8 = CRC-32, 16 = reserved
-                 (expedited lane), 32 = escape XON/XOFF too
+                 packing (printable line), 8 = CRC-32, 16 = expedited
+                 lane, 32 = escape XON/XOFF too
  24   XWINDO     three chars, tochar of 6 bits each, most significant first:
                  the window offered with long sequence numbers (with XCAPAS 1)
 ====  =========  ==========================================================
@@ -101,14 +101,15 @@ CRC-16 misses the residual-error target, PROTOCOL.md 10.5).  Every endpoint
 that sets any of bits 2, 4, 8 decodes CRC-32, so the wish of either side is
 granted when both set one of them."""
 FEATURE_EXPEDITED = 16
-"""XCAPAS bit reserved for the expedited lane (issue 20): never sent, ignored."""
+"""XCAPAS bit: I speak the expedited lane (PROTOCOL.md section 11); agreed when
+both set it."""
 FEATURE_XON_XOFF = 32
 """XCAPAS bit: my line uses software flow control: the escape code must
 escape XON/XOFF (:data:`~serialsocket._dense.XON_XOFF`) too."""
 DENSE_FEATURES = FEATURE_ESCAPE | FEATURE_RADIX91
 """What a telelink endpoint of this version decodes: offered with
 ``EndpointConfig(dense=True)``."""
-_KNOWN_FEATURES = DENSE_FEATURES | FEATURE_CRC32 | FEATURE_XON_XOFF
+_KNOWN_FEATURES = DENSE_FEATURES | FEATURE_CRC32 | FEATURE_XON_XOFF | FEATURE_EXPEDITED
 
 DataCodec = Encoding | EscapeEncoding | Radix91Encoding
 """A data-field encoding: ``encode_fields`` on the sending side,
@@ -218,7 +219,11 @@ class InitParameters:
         """
         if encoding is None:
             encoding = Encoding()  # left to a line nobody looked at: printable
-        if features is not None and (check is BlockCheck.CRC32 or crc32_wanted(max_packet_length)):
+        if (
+            features is not None
+            and features & DENSE_FEATURES
+            and (check is BlockCheck.CRC32 or crc32_wanted(max_packet_length))
+        ):
             features |= FEATURE_CRC32
         return cls(
             max_packet_length=max_packet_length,
@@ -247,9 +252,11 @@ class InitParameters:
         if theirs.features is not None and self.features is not None:
             # Encodings: what both decode.  CRC-32 and XON/XOFF: wishes and
             # declarations, mine and (CRC-32) the requester's echoed.
+            # CRC-32 only from a side that decodes it (one that sets 2, 4 or 8).
+            speaks = self.features & (DENSE_FEATURES | FEATURE_CRC32)
             features = (
-                (self.features & theirs.features & DENSE_FEATURES)
-                | ((self.features | theirs.features) & FEATURE_CRC32)
+                (self.features & theirs.features & (DENSE_FEATURES | FEATURE_EXPEDITED))
+                | ((self.features | theirs.features) & FEATURE_CRC32 if speaks else 0)
                 | (self.features & FEATURE_XON_XOFF)
             )
         return dataclasses.replace(
@@ -403,6 +410,7 @@ class Negotiated:
         peer: the peer's parameters as received.
         long_seq: both offered long sequence numbers: they are mod
             :data:`LONG_SEQ_MODULUS` on the wire (PROTOCOL.md section 9).
+        expedited: both offered the expedited lane (PROTOCOL.md section 11).
     """
 
     send_max_length: int
@@ -412,6 +420,7 @@ class Negotiated:
     encoding: DataCodec
     peer: InitParameters
     long_seq: bool = False
+    expedited: bool = False
 
     @property
     def modulus(self) -> int:
@@ -488,4 +497,5 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
         encoding=encoding,
         peer=theirs,
         long_seq=long_seq,
+        expedited=bool(common & FEATURE_EXPEDITED),
     )

@@ -217,6 +217,71 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         finally:
             self._receiving = False
 
+    # -- the expedited lane (PROTOCOL.md section 11) ------------------------------
+
+    @property
+    def expedited(self) -> bool:
+        """Both ends agreed on the expedited lane: :meth:`send_expedited` and
+        :meth:`receive_expedited` work (False with a classic or older peer)."""
+        return self._d.ep.expedited
+
+    async def send_expedited(self, message: bytes | bytearray | memoryview) -> None:
+        """Send one small urgent message ahead of every byte queued on the stream.
+
+        Returns once it is queued (it is on the line at once, behind only what
+        the UART holds); it is retransmitted until acknowledged and reaches
+        the peer's :meth:`receive_expedited` whole and exactly once.  It is
+        not ordered with the stream: it overtakes data sent before it.
+        Waits (cancellably) while the lane already holds its limit of
+        unacknowledged messages.
+
+        Raises:
+            trio.ClosedResourceError: this socket was closed.
+            trio.BrokenResourceError: the connection failed, or has no lane
+                (check :attr:`expedited`).
+            ValueError: ``message`` is empty or too long for the lane (1024
+                bytes at most, and 31 packets at the negotiated length).
+        """
+        await trio.lowlevel.checkpoint()
+        while True:
+            self._check_open()
+            self._raise_if_broken()
+            ep = self._d.ep
+            if not ep.expedited:
+                raise trio.BrokenResourceError(
+                    "this connection has no expedited lane (the peer did not agree to one)"
+                )
+            try:
+                ep.send_expedited(message, self._d.now())
+            except LocalProtocolError as exc:
+                if ep.state is not State.ESTABLISHED:
+                    raise trio.BrokenResourceError(str(exc)) from exc
+                await self._d.changed()  # the lane is full: wait for an acknowledgement
+                continue
+            self._d.notify()
+            return
+
+    async def receive_expedited(self) -> bytes:
+        """The peer's next expedited message, whole; waits (cancellably) for one.
+
+        Raises:
+            trio.ClosedResourceError: this socket was closed.
+            trio.BrokenResourceError: the connection ended (messages that had
+                arrived are returned first).
+        """
+        await trio.lowlevel.checkpoint()
+        while True:
+            self._check_open()
+            message = self._d.ep.read_expedited()
+            if message is not None:
+                return message
+            self._raise_if_broken()
+            if self._d.ep.state in TERMINAL:
+                raise trio.BrokenResourceError(
+                    f"the connection ended ({self._d.ep.state.value}); no more expedited messages"
+                )
+            await self._d.changed()
+
     async def aclose(self) -> None:
         """Close gracefully: all our data acknowledged, both EOFs exchanged.
 

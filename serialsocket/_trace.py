@@ -22,6 +22,7 @@ import trio
 from ._checks import BlockCheck
 from ._encoding import PRINTABLE, Encoding
 from ._errors import MalformedDataError, RemoteProtocolError
+from ._expedited import URGENT
 from ._params import DataCodec, InitParameters, negotiate
 from ._parser import PacketParser, PacketReceived
 from ._port import PortStatistics, port_statistics
@@ -78,9 +79,13 @@ class _Direction:
                     or (pkt.type == PacketType.ACK and len(pkt.data) >= _INIT_ANSWER)
                 ):
                     self._on_init(pkt.data)
-                if pkt.type == PacketType.DATA:
+                if pkt.type in (PacketType.DATA, URGENT):
+                    # An expedited fragment (PROTOCOL.md 11): tochar(more), then data.
+                    skip = self.head if pkt.type == PacketType.DATA else 1
+                    if pkt.type == URGENT and pkt.data:
+                        head += f" expedited more={pkt.data[0] - 32}"
                     try:
-                        payload = self.encoding.decode(pkt.data[self.head :])
+                        payload = self.encoding.decode(pkt.data[skip:])
                     except MalformedDataError as exc:
                         log.debug("%s undecodable field %r: %s", head, pkt.data[:_PREVIEW], exc)
                         continue

@@ -240,6 +240,60 @@ class AsyncioSerialSocket:
                 return
             await self._d.changed()
 
+    # -- the expedited lane (PROTOCOL.md section 11) ---------------------------
+
+    @property
+    def expedited(self) -> bool:
+        """Both ends agreed on the expedited lane (False with a classic or older peer)."""
+        return self._d.ep.expedited
+
+    async def send_expedited(self, message: bytes | bytearray | memoryview) -> None:
+        """Send one small urgent message ahead of every byte queued on the stream
+        (see ``SerialSocket.send_expedited``); waits while the lane is full.
+
+        Raises:
+            ConnectionError: the connection failed or has no lane.
+            RuntimeError: the socket was closed.
+            ValueError: ``message`` is empty or too long for the lane.
+        """
+        while True:
+            self._check_open()
+            self._raise_if_broken()
+            ep = self._d.ep
+            if not ep.expedited:
+                raise ConnectionError(
+                    "this connection has no expedited lane (the peer did not agree to one)"
+                )
+            try:
+                ep.send_expedited(message, self._d.now())
+            except LocalProtocolError as exc:
+                if ep.state is not State.ESTABLISHED:
+                    raise ConnectionError(str(exc)) from exc
+                await self._d.changed()  # the lane is full: wait for an acknowledgement
+                continue
+            self._d.notify()
+            return
+
+    async def receive_expedited(self) -> bytes:
+        """The peer's next expedited message, whole; waits for one.
+
+        Raises:
+            ConnectionError: the connection ended (messages that had arrived
+                are returned first).
+            RuntimeError: the socket was closed.
+        """
+        while True:
+            self._check_open()
+            message = self._d.ep.read_expedited()
+            if message is not None:
+                return message
+            self._raise_if_broken()
+            if self._d.ep.state in TERMINAL:
+                raise ConnectionError(
+                    f"the connection ended ({self._d.ep.state.value}); no more expedited messages"
+                )
+            await self._d.changed()
+
     def can_write_eof(self) -> bool:
         return True
 

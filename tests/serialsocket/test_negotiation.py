@@ -130,8 +130,10 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
     a = Endpoint(EndpointConfig(dense=True, long_window=None))
     a.connect(0.0)
     field = _init_field(a, 0.0)
-    assert field == b'~  @-#&5~&?!:0___@"TL@!  R&'  # PROTOCOL.md 10.1's example
-    assert InitParameters.decode(field).features == FEATURE_ESCAPE | FEATURE_RADIX91
+    assert field == b'~  @-#&5~&?!:0___@"TL@!  R6'  # PROTOCOL.md 10.1's example
+    assert InitParameters.decode(field).features == (
+        FEATURE_ESCAPE | FEATURE_RADIX91 | FEATURE_EXPEDITED
+    )
     b = Endpoint(
         EndpointConfig(
             dense=True,
@@ -144,11 +146,11 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
     b.connect(0.0)
     field = _init_field(b, 0.0)
     assert field[6:7] == b"Y"  # QBIN: an 8-bit line
-    assert field[26:] == bytes((32 + (2 | 4 | 8 | 32),))  # 'N'
+    assert field[26:] == bytes((32 + (2 | 4 | 8 | 16 | 32),))  # '^'
 
 
 def test_a_request_without_xcapas_gets_exactly_the_classic_answer() -> None:
-    classic = EndpointConfig(dense=False, long_window=None)
+    classic = EndpointConfig(dense=False, long_window=None, expedited=False)
     for listener in (EndpointConfig(dense=True, long_window=None), classic):
         a, b = Endpoint(classic), Endpoint(listener)
         b.listen()
@@ -163,12 +165,8 @@ def test_a_request_without_xcapas_gets_exactly_the_classic_answer() -> None:
         assert b.parameters.encoding == PRINTABLE
         assert b.parameters.check is BlockCheck.CRC16
     # The dense listener's answer is byte for byte the classic listener's.
-    first = _answer(
-        EndpointConfig(dense=False, long_window=None), EndpointConfig(dense=True, long_window=None)
-    )
-    second = _answer(
-        EndpointConfig(dense=False, long_window=None), EndpointConfig(dense=False, long_window=None)
-    )
+    first = _answer(classic, EndpointConfig(dense=True, long_window=None))
+    second = _answer(classic, EndpointConfig(dense=False, long_window=None))
     assert first == second
 
 
@@ -188,7 +186,8 @@ def test_a_classic_request_with_long_numbers_gets_only_the_long_number_fields() 
     long_line = EndpointConfig(
         dense=True, one_way_delay=30.0, line_rate=9600, max_packet_length=128
     )
-    a, b = Endpoint(replace(long_line, dense=False)), Endpoint(EndpointConfig(dense=True))
+    a = Endpoint(replace(long_line, dense=False, expedited=False))
+    b = Endpoint(EndpointConfig(dense=True))
     b.listen()
     a.connect(0.0)
     b.receive_data(a.data_to_send(0.0), 0.5)
@@ -209,7 +208,8 @@ def test_unknown_and_reserved_bits_are_ignored_and_never_echoed() -> None:
         features=FEATURE_ESCAPE | FEATURE_RADIX91,
     )
     field = mine.encode()
-    # A future peer: expedited lane (16) and an unknown bit 64 besides escape.
+    # A peer with the expedited lane (16, not offered here) and an unknown
+    # bit 64 besides escape.
     future = InitParameters.decode(field[:-1] + bytes((32 + (FEATURE_ESCAPE | 16 | 64),)))
     assert future.features == FEATURE_ESCAPE | FEATURE_EXPEDITED | 64
     answer = mine.answer(future, None)
@@ -218,7 +218,7 @@ def test_unknown_and_reserved_bits_are_ignored_and_never_echoed() -> None:
     agreed = negotiate(answer, future)
     assert agreed.encoding == EscapeEncoding()
     assert agreed.check is BlockCheck.CRC16
-    # Only unknown bits: nothing dense, the classic 8-bit profile.
+    # Only bits this side does not offer: nothing dense, the classic 8-bit profile.
     only_future = InitParameters.decode(field[:-1] + bytes((32 + 16,)))
     agreed = negotiate(mine.answer(only_future, None), only_future)
     assert agreed.encoding == EIGHT_BIT_CLEAN
