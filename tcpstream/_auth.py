@@ -55,6 +55,11 @@ TO_SERVER = b"\x01"
 """Direction byte for packets the controller sends."""
 TO_CLIENT = b"\x02"
 """Direction byte for packets the arm sends."""
+TO_SERVER_EXPEDITED = b"\x03"
+"""Direction byte for the controller's packets on a transport's expedited lane
+(PROTOCOL.md section 15): their own counter, so the lane may overtake the
+stream without either looking replayed, and a tag that verifies on no other
+path."""
 
 
 def _transcript(

@@ -85,7 +85,8 @@ class ClientConnection(_Connection):
     def send_command(
         self, request_id: int, command: Command, now: float, *, failures_seen: int = 0
     ) -> None:
-        """Send a command (EMERGENCY_STOP goes as its own packet kind).
+        """Send a command (EMERGENCY_STOP goes as its own packet kind, on the
+        transport's expedited lane when there is one: :attr:`expedited`).
 
         ``failures_seen``: the highest request id of a FAILED reply received so
         far (PROTOCOL.md section 9, the failure barrier).
@@ -96,9 +97,12 @@ class ClientConnection(_Connection):
             raise LocalProtocolError(f"failures_seen {failures_seen} outside 0..2**32-1")
         self._move(Trigger.COMMAND)
         if command.code is CommandCode.EMERGENCY_STOP:
-            self._send(
-                Packet(PacketKind.EMERGENCY_STOP, code=command.code, request_id=request_id), now
-            )
+            stop = Packet(PacketKind.EMERGENCY_STOP, code=command.code, request_id=request_id)
+            if self.expedited:
+                # Ahead of everything queued on the stream (PROTOCOL.md 15).
+                self._send_expedited(stop, now)
+            else:
+                self._send(stop, now)
             return
         self._send(
             Packet(

@@ -86,6 +86,10 @@ class ConnectionStatistics:
     heartbeats_out: int
     last_counter_in: int
     last_counter_out: int
+    expedited_in: int = 0
+    """EMERGENCY_STOPs taken from the transport's expedited lane (PROTOCOL.md 15)."""
+    expedited_out: int = 0
+    """EMERGENCY_STOPs sent on the transport's expedited lane."""
 
 
 def _identity_bytes(name: str) -> bytes:
@@ -134,6 +138,13 @@ class _Connection(abc.ABC):
         self._counter_in = 0
         self._counter_out = 0
         self._bad_in_a_row = 0
+        self.expedited = False
+        """The transport offers an expedited lane (set by the I/O layer before
+        the session starts; PROTOCOL.md section 15): the controller sends its
+        EMERGENCY_STOP there, the arm takes it from there."""
+        self._xout: list[bytes] = []
+        self._xcounter_in = 0
+        self._xcounter_out = 0
         self._stats = dict.fromkeys(
             (
                 "packets_in",
@@ -144,6 +155,8 @@ class _Connection(abc.ABC):
                 "replays",
                 "heartbeats_in",
                 "heartbeats_out",
+                "expedited_in",
+                "expedited_out",
             ),
             0,
         )
@@ -228,6 +241,84 @@ class _Connection(abc.ABC):
         self._out.clear()
         self._out_bytes = 0
         return out
+
+    @property
+    def expedited_pending(self) -> int:
+        """Expedited packets queued and not yet taken by :meth:`expedited_to_send`."""
+        return len(self._xout)
+
+    def expedited_to_send(self) -> list[bytes]:
+        """Packets for the transport's expedited lane since the last call, each
+        one message (PROTOCOL.md section 15)."""
+        out, self._xout = self._xout, []
+        return out
+
+    def receive_expedited(self, message: bytes, now: float) -> None:
+        """One message from the transport's expedited lane.
+
+        It must be one whole packet, tagged for the lane (direction 0x03) when
+        the session is keyed, with a lane counter above the last one, and an
+        EMERGENCY_STOP: anything else is counted and dropped (a forgery or a
+        broken peer; never answered, so the lane cannot be used to probe).
+        Then it is handled as the same packet on the stream would be.
+        """
+        if self._state is SessionState.CLOSED:
+            return
+        why = self._expedited_problem(message)
+        if why is not None:
+            self._stats["bad_packets"] += 1
+            if trace.isEnabledFor(logging.DEBUG):
+                trace.debug("%s expedited dropped: %s", self.side.value, why)
+            self._events.append(PacketRejected(FailureReason.NOT_AUTHORIZED, why))
+            return
+        packet = decode_packet(message)
+        self._xcounter_in = packet.counter
+        self._stats["expedited_in"] += 1
+        self._last_in = now
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s expedited in: %s", self.side.value, packet.describe())
+        self._dispatch(packet, now)
+
+    def _expedited_problem(self, message: bytes) -> str | None:
+        """Why an expedited message is not a genuine lane packet (None: it is)."""
+        if self.side is not Side.SERVER:
+            return "expedited message to the controller: only the controller sends on the lane"
+        if len(message) != PACKET_SIZE:
+            return f"expedited message of {len(message)} bytes, not one {PACKET_SIZE}-byte packet"
+        if self._session_key is not None:
+            expected = _auth.packet_tag(
+                self._session_key, _auth.TO_SERVER_EXPEDITED, message[:SIGNED_SIZE]
+            )
+            if not _auth.verify(expected, message[SIGNED_SIZE:]):
+                return "expedited message: authentication tag mismatch"
+        if self._state is not SessionState.OPEN:
+            return "expedited message outside an open session"
+        try:
+            packet = decode_packet(message)
+        except PacketError as exc:
+            return f"expedited message does not decode: {exc.message}"
+        if packet.kind is not PacketKind.EMERGENCY_STOP:
+            return f"{packet.kind.name} on the expedited lane (only EMERGENCY_STOP travels there)"
+        if packet.counter <= self._xcounter_in:
+            return f"expedited counter {packet.counter} is not above {self._xcounter_in}: replayed"
+        return None
+
+    def _send_expedited(self, packet: Packet, now: float) -> None:
+        """Queue ``packet`` for the expedited lane, with the lane's own counter
+        and direction (the arm checks both apart from the stream's)."""
+        self._xcounter_out += 1
+        stamped = _with(packet, counter=self._xcounter_out)
+        unsigned = encode_packet(stamped)
+        signed = unsigned[:SIGNED_SIZE]
+        if self._session_key is not None:
+            raw = signed + _auth.packet_tag(self._session_key, _auth.TO_SERVER_EXPEDITED, signed)
+        else:
+            raw = unsigned
+        self._xout.append(raw)
+        self._stats["expedited_out"] += 1
+        self._last_out = now
+        if trace.isEnabledFor(logging.DEBUG):
+            trace.debug("%s expedited out: %s", self.side.value, stamped.describe())
 
     @property
     def buffered(self) -> int:

@@ -79,10 +79,11 @@ class Lookup(enum.Enum):
 
 
 class _Record:
-    __slots__ = ("barrier", "done", "highest", "in_flight")
+    __slots__ = ("barrier", "done", "highest", "in_flight", "stopped_at")
 
     def __init__(self) -> None:
         self.barrier = 0
+        self.stopped_at = 0
         self.highest = 0
         self.in_flight: set[int] = set()
         self.done: OrderedDict[int, StoredReply] = OrderedDict()
@@ -180,6 +181,17 @@ class RequestMemory:
         """Commands sent without having seen ``request_id``'s failure will be skipped."""
         rec = self._record(identity)
         rec.barrier = max(rec.barrier, request_id)
+
+    def stopped_at(self, identity: ControllerIdentity) -> int:
+        """The request id of this controller's latest EMERGENCY_STOP (0: none)."""
+        rec = self._records.get(identity)
+        return rec.stopped_at if rec is not None else 0
+
+    def note_stop(self, identity: ControllerIdentity, request_id: int) -> None:
+        """An EMERGENCY_STOP was taken in: commands numbered below it that
+        arrive later were sent before it (it overtook them) and never run."""
+        rec = self._record(identity)
+        rec.stopped_at = max(rec.stopped_at, request_id)
 
     def in_flight(self, identity: ControllerIdentity) -> int:
         rec = self._records.get(identity)

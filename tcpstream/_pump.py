@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
+from typing import Protocol, runtime_checkable
 
 import trio
 
@@ -19,9 +20,9 @@ from ._connection import _Connection
 from ._events import CloseReason, Event
 from ._packet import PACKET_SIZE
 from ._ratelimit import TokenBucket
-from ._state import SessionState
+from ._state import SessionState, Side
 
-__all__ = ["Pump"]
+__all__ = ["ExpeditedStream", "Pump", "expedited_lane"]
 
 log = logging.getLogger(__name__)
 
@@ -50,8 +51,37 @@ CLOSE_TIMEOUT = 5.0
 """Seconds to let the final BYE drain before the stream is closed regardless."""
 
 
+@runtime_checkable
+class ExpeditedStream(Protocol):
+    """A stream with an expedited lane beside it (``serialsocket.SerialSocket``):
+    short messages that overtake the bytes queued on the stream, delivered
+    whole and exactly once (serialsocket/PROTOCOL.md section 11)."""
+
+    @property
+    def expedited(self) -> bool:
+        """The lane is there on this connection (both ends agreed to it)."""
+        ...
+
+    async def send_expedited(self, message: bytes) -> None: ...
+
+    async def receive_expedited(self) -> bytes: ...
+
+
+def expedited_lane(stream: trio.abc.Stream) -> ExpeditedStream | None:
+    """``stream`` as an :class:`ExpeditedStream` if it has a working lane, else None."""
+    if isinstance(stream, ExpeditedStream) and stream.expedited:
+        return stream
+    return None
+
+
 class Pump:
-    """Runs one connection over one stream until the session is CLOSED."""
+    """Runs one connection over one stream until the session is CLOSED.
+
+    When the stream has an expedited lane (:func:`expedited_lane`) the
+    connection is told so, and two more tasks carry the lane: the
+    controller's EMERGENCY_STOP goes out there, the arm reads it there
+    (PROTOCOL.md section 15).
+    """
 
     def __init__(
         self,
@@ -77,6 +107,9 @@ class Pump:
         """When the session closed plus the linger time: flushing and lingering
         together end by then."""
         self._read_limit = read_limit
+        self._lane = expedited_lane(stream)
+        conn.expedited = self._lane is not None
+        self._lane_wake = trio.Event()
         self.bytes_in = 0
         self.bytes_out = 0
         self.throttles = 0
@@ -103,6 +136,8 @@ class Pump:
             if self._scope is not None:
                 self._scope.cancel()
         self.drain_events()
+        if self.conn.expedited_pending:
+            self._lane_wake.set()
         if self.conn.closed and self._scope is not None and self._scope.deadline == math.inf:
             # Over: the last packets get a bounded time to go out.  A peer that
             # stopped reading would otherwise hold the writer -- and this
@@ -133,6 +168,10 @@ class Pump:
                 self._scope = nursery.cancel_scope
                 nursery.start_soon(self._reader)
                 nursery.start_soon(self._timer)
+                if self._lane is not None:
+                    nursery.start_soon(self._lane_writer, self._lane)
+                    if self.conn.side is Side.SERVER:
+                        nursery.start_soon(self._lane_reader, self._lane)
                 await self._writer()
                 nursery.cancel_scope.cancel()
         finally:
@@ -267,6 +306,34 @@ class Pump:
                 self.bytes_out += len(data)
             if conn.state is SessionState.CLOSED and not self._wake.is_set():
                 return
+
+    async def _lane_writer(self, lane: ExpeditedStream) -> None:
+        """Hands each expedited packet to the lane as soon as it is queued --
+        never behind the stream writer, which may be waiting on a full line."""
+        while True:
+            await self._lane_wake.wait()
+            self._lane_wake = trio.Event()
+            for message in self.conn.expedited_to_send():
+                try:
+                    await lane.send_expedited(message)
+                except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    # The stream has failed too; its reader and writer report it.
+                    log.debug("expedited lane failed: %r", exc)
+                    return
+                self.bytes_out += len(message)
+
+    async def _lane_reader(self, lane: ExpeditedStream) -> None:
+        """Feeds the arm's connection what arrives on the lane."""
+        conn = self.conn
+        while conn.state is not SessionState.CLOSED:
+            try:
+                message = await lane.receive_expedited()
+            except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                log.debug("expedited lane ended: %r", exc)
+                return
+            self.bytes_in += len(message)
+            conn.receive_expedited(message, trio.current_time())
+            self.kick()
 
     async def wait_done(self) -> None:
         await self._done.wait()

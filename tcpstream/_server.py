@@ -106,6 +106,9 @@ class ServerStatistics:
     """Commands that arrived in the same read as the packet closing their session:
     not run (no ACCEPTED could be sent; the controller counts them outcome
     unknown); an emergency stop among them still stops the arm."""
+    stopped_overtaken: int = 0
+    """Commands answered FAILED STOPPED because they arrived after an emergency
+    stop sent later (it overtook them on the transport's expedited lane)."""
 
 
 @dataclass(slots=True)
@@ -218,6 +221,7 @@ class Server:
                 "throttled",
                 "handshakes_evicted",
                 "commands_after_close",
+                "stopped_overtaken",
             ),
             0,
         )
@@ -485,6 +489,20 @@ class Server:
             self._stats["duplicates_answered"] += 1
             link.conn.accepted(request_id, command.code, self._position(request_id), now)
             return
+        if status is Lookup.EXPIRED and request_id < (stop := self.memory.stopped_at(identity)):
+            # Sent before an emergency stop that overtook it on the transport's
+            # expedited lane (PROTOCOL.md 15): the stop meant this one too.
+            self._stats["stopped_overtaken"] += 1
+            self._finish(
+                identity,
+                request_id,
+                _failure(
+                    command,
+                    FailureReason.STOPPED,
+                    f"sent before emergency stop #{stop}, which arrived first; not run",
+                ),
+            )
+            return
         if status is Lookup.EXPIRED:
             self._stats["expired"] += 1
             link.conn.failed(
@@ -575,6 +593,7 @@ class Server:
         self._halt_all(FailureReason.STOPPED, "emergency stop")
         if status is Lookup.NEW:
             self.memory.start(identity, request_id)
+            self.memory.note_stop(identity, request_id)
             self._finish(
                 identity, request_id, self._state_reply(Command(CommandCode.EMERGENCY_STOP))
             )

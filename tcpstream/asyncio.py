@@ -33,7 +33,7 @@ import secrets
 import ssl as _ssl
 from collections.abc import AsyncIterator, Awaitable, Callable
 from types import TracebackType
-from typing import Any, Unpack
+from typing import Any, Protocol, Unpack, cast
 
 from ._client_connection import ClientConnection
 from ._client_core import (
@@ -177,6 +177,7 @@ class AsyncioArmClient(CommandMethods):
         self._conn: ClientConnection | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._wake = asyncio.Event()  # output for the current session's writer
+        self._lane_wake = asyncio.Event()  # an EMERGENCY_STOP for the expedited lane
         self._state: _SessionState | None = None
         # Set (and replaced) whenever the session is granted, ends or the client
         # closes: what submit() and __aenter__ wait on.
@@ -340,6 +341,8 @@ class AsyncioArmClient(CommandMethods):
             nonce_source=cfg.nonce_source,
         )
         self._conn, self._writer = conn, writer
+        lane = _expedited_lane(writer)
+        conn.expedited = lane is not None  # PROTOCOL.md section 15
         self._session_done = done = asyncio.Event()
         self._state = state = _SessionState()
         conn.connect(loop.time())
@@ -349,6 +352,8 @@ class AsyncioArmClient(CommandMethods):
             asyncio.create_task(self._write(writer, conn, state)),
             asyncio.create_task(self._tick(conn, state)),
         ]
+        if lane is not None:
+            tasks.append(asyncio.create_task(self._lane_write(lane, conn)))
         try:
             await state.over.wait()
         finally:
@@ -415,6 +420,20 @@ class AsyncioArmClient(CommandMethods):
                 state.over.set()
                 return
 
+    async def _lane_write(self, lane: _Lane, conn: ClientConnection) -> None:
+        """Hands each EMERGENCY_STOP to the stream's expedited lane at once,
+        never behind the writer, which may be waiting in ``drain``."""
+        while not conn.closed:
+            await self._lane_wake.wait()
+            self._lane_wake.clear()
+            for message in conn.expedited_to_send():
+                try:
+                    await lane.send_expedited(message)
+                except (OSError, RuntimeError) as exc:
+                    log.debug("expedited lane failed: %r", exc)  # the stream reports it too
+                    return
+                self.bytes_sent += len(message)
+
     async def _tick(self, conn: ClientConnection, state: _SessionState) -> None:
         loop = asyncio.get_running_loop()
         while not conn.closed:
@@ -436,6 +455,8 @@ class AsyncioArmClient(CommandMethods):
 
     def _kick_io(self) -> None:
         self._wake.set()
+        if self._conn is not None and self._conn.expedited_pending:
+            self._lane_wake.set()
         if self._state is not None:
             self._state.timer_moved.set()  # a state change may move the timer earlier
 
@@ -447,6 +468,8 @@ class AsyncioArmClient(CommandMethods):
         if conn.closed:
             state.over.set()
         self._wake.set()
+        if conn.expedited_pending:
+            self._lane_wake.set()
 
     def _on_event(self, event: Event, conn: ClientConnection, state: _SessionState) -> None:
         if isinstance(event, Granted):
@@ -588,6 +611,31 @@ class AsyncioArmClient(CommandMethods):
     @property
     def rejected_by_arm(self) -> int:
         return self._book.rejected_by_arm
+
+
+class _Lane(Protocol):
+    """A writer with an expedited lane (``serialsocket.asyncio``'s socket)."""
+
+    @property
+    def expedited(self) -> bool: ...
+
+    async def send_expedited(self, message: bytes) -> None: ...
+
+
+def _expedited_lane(writer: object) -> _Lane | None:
+    """The expedited lane under ``writer``, if there is a working one
+    (PROTOCOL.md section 15): the writer itself, or, for the (reader, writer)
+    pair of ``serialsocket.asyncio.open_connection``, its extra "socket"."""
+    candidates = [writer]
+    get_extra_info = getattr(writer, "get_extra_info", None)
+    if callable(get_extra_info):
+        candidates.append(get_extra_info("socket"))
+    for candidate in candidates:
+        if getattr(candidate, "expedited", False) is True and callable(
+            getattr(candidate, "send_expedited", None)
+        ):
+            return cast(_Lane, candidate)
+    return None
 
 
 class _SessionState:

@@ -29,6 +29,7 @@ import trio
 
 import serialsocket
 import serialsocket.asyncio as sa
+import tcpstream
 import tcpstream.asyncio as arm_asyncio
 from serialsocket import EndpointConfig, LinkDeadError, PeerAborted, SocketStatistics, State
 from tcpstream import Server, ServerConfig, commands
@@ -652,3 +653,56 @@ def test_misuse_is_a_runtime_error_and_leaves_the_socket_usable() -> None:
         assert (client.close_error, server.close_error) == (None, None)
 
     run(main)
+
+
+def test_the_expedited_lane_between_asyncio_sockets() -> None:
+    """send_expedited / receive_expedited: ahead of queued data, whole, once."""
+
+    async def main() -> None:
+        line = MemoryLine()
+        a, b = await pair(line.a, line.b)
+        assert a.expedited
+        assert b.expedited
+        a.write(PAYLOAD)
+        await a.send_expedited(b"stop now")
+        assert await b.receive_expedited() == b"stop now"
+        assert await b.readexactly(len(PAYLOAD)) == PAYLOAD
+        with pytest.raises(ValueError, match="1024"):
+            await a.send_expedited(bytes(2000))
+        await a.aclose()
+        await b.aclose()
+
+    run(main)
+
+
+def test_the_asyncio_client_sends_its_emergency_stop_on_the_lane() -> None:
+    """The asyncio arm client finds the lane under open_connection's writer and
+    sends EMERGENCY_STOP there; the trio arm takes it from there."""
+    arm = FakeArm(move_time=600.0)
+    seen: list[int] = []
+
+    async def arm_side(stream: trio.lowlevel.FdStream) -> None:
+        async with serialsocket.listen(stream) as listener:
+            sock = await listener.accept()
+            async with Server(arm, ServerConfig(telemetry_every=0)) as server:
+                await server.serve_stream(sock)
+                seen.append(server.statistics().emergency_stops)
+                seen.append(sock.statistics().link.expedited_received)
+
+    async def controller(path: str) -> None:
+        async def opener() -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+            return await sa.open_connection(path, baud=115200)
+
+        async with arm_asyncio.AsyncioArmClient(opener, identity="aio-lane") as client:
+            move = await client.submit(commands.move_joint(2, 0.3))
+            await move.accepted()
+            await client.emergency_stop()
+            with pytest.raises(tcpstream.CommandFailed):
+                await move.completed()
+
+    with raw_pty() as (master, path), in_trio_thread(arm_side, master) as results:
+        run(lambda: controller(path))
+        outcome = results.get(timeout=GUARD)
+    if isinstance(outcome, BaseException):
+        raise outcome
+    assert seen == [1, 1]  # one stop, and it came on the lane
