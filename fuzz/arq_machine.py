@@ -97,6 +97,7 @@ from serialsocket import (
     EndpointConfig,
     Event,
     LinkDead,
+    LocalProtocolError,
     State,
 )
 from serialsocket.argtypes import ENDPOINT_LENGTH
@@ -257,6 +258,8 @@ def endpoint_configs(
         # The dense encodings (escape code or radix 91, by the line) are used
         # when both sides offer them: three draws in four each.
         dense=draw(st.sampled_from([True, True, True, False])),
+        # The expedited lane (PROTOCOL.md section 11): used when both offer it.
+        expedited=draw(st.sampled_from([True, True, True, False])),
         check=draw(_CHECKS),
         xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
@@ -285,6 +288,9 @@ class ARQMachine(RuleBasedStateMachine):
         self.lines: dict[str, Line] = {}
         self.sent: dict[str, bytearray] = {s: bytearray() for s in SIDES}
         self.received: dict[str, bytearray] = {s: bytearray() for s in SIDES}
+        self.xsent: dict[str, list[bytes]] = {s: [] for s in SIDES}
+        """Expedited messages each side's send_expedited took, in order."""
+        self.xreceived: dict[str, list[bytes]] = {s: [] for s in SIDES}
         self.events: dict[str, list[Event]] = {s: [] for s in SIDES}
         self.healed = False
         self._eof_called = dict.fromkeys(SIDES, False)
@@ -368,6 +374,8 @@ class ARQMachine(RuleBasedStateMachine):
     def _read_all(self) -> None:
         for side in SIDES:
             self.received[side] += self.ep[side].read(None, self.now)
+            while (message := self.ep[side].read_expedited()) is not None:
+                self.xreceived[side].append(message)
         self._flush()
 
     def _can_send(self, side: str) -> bool:
@@ -458,6 +466,33 @@ class ARQMachine(RuleBasedStateMachine):
         got = self.ep[side].read(n, self.now)
         assert len(got) == (before if n is None else min(n, before))
         self.received[side] += got
+        self._flush()
+
+    def _lane_senders(self) -> list[str]:
+        return [s for s in SIDES if self.ep[s].state is State.ESTABLISHED and self.ep[s].expedited]
+
+    @precondition(lambda self: bool(self._lane_senders()))
+    @rule(data=st.data(), message=st.binary(min_size=1, max_size=300))
+    def app_send_expedited(self, data: st.DataObject, message: bytes) -> None:
+        """An urgent message on the lane: overtakes the stream, arrives once."""
+        side = data.draw(st.sampled_from(self._lane_senders()), label="side")
+        refused: Exception | None = None
+        try:
+            self.ep[side].send_expedited(message, self.now)
+        except (LocalProtocolError, ValueError) as exc:
+            refused = exc
+        if refused is not None:
+            # Only a full lane, or a message too long for short packets, is refused.
+            why = str(refused)
+            assert "wait" in why or "packets" in why, why
+            return
+        self.xsent[side].append(message)
+        self._flush()
+
+    @rule(side=_side)
+    def app_read_expedited(self, side: str) -> None:
+        while (message := self.ep[side].read_expedited()) is not None:
+            self.xreceived[side].append(message)
         self._flush()
 
     @precondition(lambda self: bool(self._closers()))
@@ -597,6 +632,15 @@ class ARQMachine(RuleBasedStateMachine):
             )
 
     @invariant()
+    def expedited_messages_arrive_once_and_in_order(self) -> None:
+        for side in SIDES:
+            got, sent = self.xreceived[side], self.xsent[self._peer(side)]
+            assert got == sent[: len(got)], (
+                f"{side} read expedited messages the peer did not send in that order: "
+                f"{len(got)} read, {len(sent)} sent"
+            )
+
+    @invariant()
     def end_of_stream_means_everything_arrived(self) -> None:
         for side in SIDES:
             if any(isinstance(e, EndOfStream) for e in self.events[side]):
@@ -674,6 +718,7 @@ class ARQMachine(RuleBasedStateMachine):
         for side in SIDES:
             peer = self._peer(side)
             assert self.received[side] == self.sent[peer]
+            assert self.xreceived[side] == self.xsent[peer]
             assert self.ep[side].at_eof
             assert self.ep[side].all_acknowledged
             kinds = [type(e) for e in self.events[side]]
@@ -697,6 +742,7 @@ class ARQMachine(RuleBasedStateMachine):
     def check_all(self) -> None:
         """Every invariant, for use outside hypothesis's own invariant checks."""
         self.delivered_is_prefix_of_sent()
+        self.expedited_messages_arrive_once_and_in_order()
         self.end_of_stream_means_everything_arrived()
         self.connection_stays_alive()
         self.accounting_is_consistent()
