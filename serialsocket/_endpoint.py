@@ -1431,7 +1431,8 @@ class Endpoint:
         rate = self._rate.rate
         if rate is not None:
             rtt = max(self._rtt.srtt or 0.0, 2 * self._one_way())
-            need = int(BUFFER_ROUND_TRIPS * rate * rtt)
+            product = BUFFER_ROUND_TRIPS * rate * rtt
+            need = int(product) if math.isfinite(product) else cfg.buffer_cap + 1
             self._buffer_capped = need > cfg.buffer_cap
             want = max(want, min(need, cfg.buffer_cap))
         self._receiver.receive_buffer = max(self._receiver.receive_buffer, want)

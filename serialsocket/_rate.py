@@ -355,10 +355,19 @@ class RateEstimator:
                 # Sent after the model was pulled back, and early again: the
                 # model drains slower than the line and the pacer holds back
                 # what the line could carry.  Double, until the queue (or a
-                # busy run's measurement) says stop.
-                self.rate *= self._ramp(mark, now, wire_bytes)
-                self.raises += 1
-                changed = True
+                # busy run's measurement) says stop -- but never past a few
+                # times what the line was measured to deliver: a pacer that
+                # holds data back delivers at about the rate it paces at, so
+                # the bound lets that grow as fast as before, while a sender
+                # with little to send (one small packet a round trip, each
+                # "early") proves nothing about the line, and ramping on it
+                # took 2400 bit/s to 10^300 and overflowed the buffer sizing.
+                ceiling = max(self.rate, RAMP_MAX * (self.measured or 0.0))
+                ramped = min(self.rate * self._ramp(mark, now, wire_bytes), ceiling)
+                if ramped > self.rate:
+                    self.rate = ramped
+                    self.raises += 1
+                    changed = True
         if mark.handed_end >= self._point_handed:
             self._point_time = now
             self._point_handed = mark.handed_end

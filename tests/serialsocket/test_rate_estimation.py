@@ -245,3 +245,24 @@ def test_a_connectors_bound_never_judges_speed() -> None:
     assert not est.plausible(1.0)
     assert not est.fast_evidence(2.0, 0.05, 0.01)
     assert est.rate == 960.0
+
+
+def test_early_packets_of_an_idle_sender_never_ramp_the_rate_without_bound() -> None:
+    """Found by the deep stateful fuzzer: one small packet per round trip, each
+    acknowledged "early" (the model's departure ran late), ramped the rate by
+    four every round trip -- 2400 bit/s became 10^300 and the receive buffer's
+    size overflowed (OverflowError in the endpoint).  The pacer never held
+    those packets back, so the line's speed is not what kept them slow: the
+    ramp stops at a few times what was measured."""
+    est = RateEstimator(240.0)
+    est.start(0.0, 2.6)
+    now = 0.0
+    for _ in range(400):
+        est.hand(96)
+        mark = est.mark(now)
+        assert mark is not None
+        now += 3.6
+        est.on_delivery(mark, now, 2.0, 3.6, fast=True, wire_bytes=96)
+    assert est.rate is not None
+    assert est.measured is not None
+    assert est.rate <= 4 * max(240.0, est.measured)
