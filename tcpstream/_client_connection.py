@@ -67,6 +67,10 @@ class ClientConnection(_Connection):
             key=key, handshake_timeout=handshake_timeout, now=now, nonce_source=nonce_source
         )
         self.identity = identity
+        self.arm_reads_lane = False
+        """The arm's GRANT said it reads EMERGENCY_STOP from the transport's
+        expedited lane (PROTOCOL.md 15): only then does a stop go there, so an
+        arm whose session layer does not read the lane still gets it."""
         self._identity_raw = _identity_bytes(identity.name)
         if not 0 <= identity.incarnation < 2**64:
             raise ValueError("incarnation must fit in 64 bits")
@@ -86,7 +90,8 @@ class ClientConnection(_Connection):
         self, request_id: int, command: Command, now: float, *, failures_seen: int = 0
     ) -> None:
         """Send a command (EMERGENCY_STOP goes as its own packet kind, on the
-        transport's expedited lane when there is one: :attr:`expedited`).
+        transport's expedited lane when there is one (:attr:`expedited`) and
+        the arm said it reads it (:attr:`arm_reads_lane`)).
 
         ``failures_seen``: the highest request id of a FAILED reply received so
         far (PROTOCOL.md section 9, the failure barrier).
@@ -98,7 +103,7 @@ class ClientConnection(_Connection):
         self._move(Trigger.COMMAND)
         if command.code is CommandCode.EMERGENCY_STOP:
             stop = Packet(PacketKind.EMERGENCY_STOP, code=command.code, request_id=request_id)
-            if self.expedited:
+            if self.expedited and self.arm_reads_lane:
                 # Ahead of everything queued on the stream (PROTOCOL.md 15).
                 self._send_expedited(stop, now)
             else:
@@ -212,7 +217,8 @@ class ClientConnection(_Connection):
         self._move(Trigger.GRANT_IN)
         self.role = role
         self._params = params
-        instance, remembered = struct.unpack_from("!QB", packet.body, _auth.PROOF_SIZE)
+        instance, remembered, lane = struct.unpack_from("!QBB", packet.body, _auth.PROOF_SIZE)
+        self.arm_reads_lane = lane == 1
         self._events.append(
             Granted(role, params, packet.request_id, instance, remembered=remembered == 1)
         )

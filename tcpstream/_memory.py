@@ -79,11 +79,12 @@ class Lookup(enum.Enum):
 
 
 class _Record:
-    __slots__ = ("barrier", "done", "highest", "in_flight", "stopped_at")
+    __slots__ = ("barrier", "done", "evicted_max", "highest", "in_flight", "stopped_at")
 
     def __init__(self) -> None:
         self.barrier = 0
         self.stopped_at = 0
+        self.evicted_max = 0
         self.highest = 0
         self.in_flight: set[int] = set()
         self.done: OrderedDict[int, StoredReply] = OrderedDict()
@@ -170,7 +171,8 @@ class RequestMemory:
         rec.highest = max(rec.highest, request_id)
         rec.done[request_id] = reply
         while len(rec.done) > self.size:
-            rec.done.popitem(last=False)
+            evicted, _ = rec.done.popitem(last=False)
+            rec.evicted_max = max(rec.evicted_max, evicted)
 
     def barrier(self, identity: ControllerIdentity) -> int:
         """The request id of this controller's latest failure at the arm (0: none)."""
@@ -192,6 +194,13 @@ class RequestMemory:
         arrive later were sent before it (it overtook them) and never run."""
         rec = self._record(identity)
         rec.stopped_at = max(rec.stopped_at, request_id)
+
+    def may_have_run(self, identity: ControllerIdentity, request_id: int) -> bool:
+        """Whether ``request_id``, neither in flight nor remembered, may have
+        finished and been evicted (False: it never reached the arm, or the
+        identity is not remembered at all -- then nothing is known)."""
+        rec = self._records.get(identity)
+        return rec is None or request_id <= rec.evicted_max
 
     def in_flight(self, identity: ControllerIdentity) -> int:
         rec = self._records.get(identity)

@@ -489,9 +489,14 @@ class Server:
             self._stats["duplicates_answered"] += 1
             link.conn.accepted(request_id, command.code, self._position(request_id), now)
             return
-        if status is Lookup.EXPIRED and request_id < (stop := self.memory.stopped_at(identity)):
+        if (
+            status is Lookup.EXPIRED
+            and request_id < (stop := self.memory.stopped_at(identity))
+            and not self.memory.may_have_run(identity, request_id)
+        ):
             # Sent before an emergency stop that overtook it on the transport's
             # expedited lane (PROTOCOL.md 15): the stop meant this one too.
+            # (One that may have run and been forgotten stays EXPIRED below.)
             self._stats["stopped_overtaken"] += 1
             self._finish(
                 identity,

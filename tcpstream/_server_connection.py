@@ -111,7 +111,10 @@ class ServerConnection(_Connection):
                 self._incarnation,
                 self._wanted,
             )
-        body = (proof + _INSTANCE.pack(self._instance, int(remembered))).ljust(BODY_SIZE, b"\0")
+        # The lane flag: this arm reads EMERGENCY_STOP from the transport's
+        # expedited lane (PROTOCOL.md 15); a controller uses the lane only then.
+        grant_tail = _INSTANCE.pack(self._instance, int(remembered)) + bytes((int(self.expedited),))
+        body = (proof + grant_tail).ljust(BODY_SIZE, b"\0")
         aux = (p.heartbeat_interval, p.dead_time, p.telemetry_period, float(p.memory_size))
         self._send(
             Packet(PacketKind.GRANT, flags=role, request_id=last_request_id, aux=aux, body=body),

@@ -141,8 +141,11 @@ def test_without_the_lane_the_stop_waits_behind_the_queue() -> None:
 # -- the lane's packets at the connection (sans-I/O) ----------------------------------------
 
 
-def _open_pair(key: bytes | None) -> tuple[ClientConnection, ServerConnection]:
-    """A granted controller session, the handshake driven by hand."""
+def _open_pair(
+    key: bytes | None, *, arm_reads_lane: bool = True
+) -> tuple[ClientConnection, ServerConnection]:
+    """A granted controller session over a stream with a lane, the handshake
+    driven by hand; ``arm_reads_lane``: the arm's session reads the lane."""
     client = ClientConnection(IDENTITY, key=key, nonce_source=lambda n: bytes(n))
     server = ServerConnection(
         PARAMETERS, key=key, instance=ARM_INSTANCE, nonce_source=lambda n: bytes([1] * n)
@@ -155,6 +158,8 @@ def _open_pair(key: bytes | None) -> tuple[ClientConnection, ServerConnection]:
             requested = requested or isinstance(event, ControlRequested)
         if not requested:
             client.receive_data(server.data_to_send(), 0.0)
+    client.expedited = True
+    server.expedited = arm_reads_lane
     server.grant(Role.CONTROLLER, 0, 0.0, remembered=False)
     client.receive_data(server.data_to_send(), 0.0)
     while client.next_event() is not None:
@@ -171,7 +176,7 @@ def _stop_packet(counter: int, request_id: int = 5) -> bytes:
 @pytest.mark.parametrize("key", [None, KEY])
 def test_the_arm_takes_a_stop_from_the_lane_once_and_nothing_else(key: bytes | None) -> None:
     client, server = _open_pair(key)
-    client.expedited = True
+    assert client.arm_reads_lane
     client.send_command(9, commands.emergency_stop(), 10.0)
     assert client.data_to_send() == b""  # not on the stream
     (lane_packet,) = client.expedited_to_send()
@@ -195,10 +200,22 @@ def test_the_arm_takes_a_stop_from_the_lane_once_and_nothing_else(key: bytes | N
 
 def test_a_lane_packet_on_the_stream_does_not_verify_there() -> None:
     client, server = _open_pair(KEY)
-    client.expedited = True
     client.send_command(9, commands.emergency_stop(), 10.0)
     (lane_packet,) = client.expedited_to_send()
     server.receive_data(lane_packet, 10.5)
     event = server.next_event()
     assert isinstance(event, PacketRejected)
     assert "tag" in event.message
+
+
+def test_an_arm_that_does_not_read_the_lane_gets_the_stop_on_the_stream() -> None:
+    """The lane is the transport's; whether the arm's session reads it is the
+    GRANT's lane flag.  An arm that reads the serial socket as a plain stream
+    says 0, and the stop goes where it will be seen."""
+    client, server = _open_pair(KEY, arm_reads_lane=False)
+    assert not client.arm_reads_lane
+    client.send_command(9, commands.emergency_stop(), 10.0)
+    assert client.expedited_to_send() == []
+    server.receive_data(client.data_to_send(), 10.5)
+    event = server.next_event()
+    assert type(event).__name__ == "EmergencyStopRequested"

@@ -66,3 +66,20 @@ def test_least_recently_used_identity_is_forgotten_but_never_one_in_flight() -> 
 def test_bounds_are_validated() -> None:
     with pytest.raises(ValueError, match=">= 1"):
         RequestMemory(size=0)
+
+
+def test_an_id_overtaken_by_a_stop_is_known_never_taken_unless_it_may_have_been_evicted() -> None:
+    """The overtaken-stop rule (PROTOCOL.md 15) answers STOPPED, "not run",
+    only for ids the arm knows it never took in: not for one at or below an
+    evicted reply, which may have run."""
+    memory = RequestMemory(size=2)
+    for rid in (1, 2, 3):
+        memory.start(A, rid)
+        memory.finish(A, rid, done())
+    memory.start(A, 9)  # an emergency stop that overtook 4..8
+    memory.note_stop(A, 9)
+    assert memory.stopped_at(A) == 9
+    assert memory.lookup(A, 5) == (Lookup.EXPIRED, None)
+    assert not memory.may_have_run(A, 5)  # 5 never reached the arm
+    assert memory.may_have_run(A, 1)  # 1 finished and was forgotten
+    assert memory.may_have_run(ControllerIdentity("unknown", 1), 5)
