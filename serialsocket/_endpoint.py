@@ -1363,6 +1363,8 @@ class Endpoint:
         if expired:
             self._counters["timeouts"] += 1
             self._rtt.on_timeout()
+            if self._rate.on_timeout():
+                self._rate_changed()
             limit = self.config.max_retries
             for seq in expired:
                 pkt = self._sender.outstanding[seq]

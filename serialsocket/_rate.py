@@ -149,6 +149,8 @@ class RateEstimator:
         self._epoch = 0
         self._offset_epoch = -1
         self._pushed = False
+        self._ramped_from: float | None = None
+        """The rate before the first ramp not yet confirmed by a busy run."""
         self.pull_back = 0.0
         """Seconds the pacer's model should move earlier (set by :meth:`on_delivery`)."""
         self._init_bytes = 0
@@ -334,13 +336,19 @@ class RateEstimator:
                         self.lowers += 1
                 self.rate = busy
                 self.busy_change = True
+                self._ramped_from = None  # a measurement, not a guess, from here
                 changed = True
             elif self.rate is not None and measured > self.rate * RAISE_MARGIN:
                 self.rate = measured
                 self.raises += 1
                 changed = True
         self.pull_back = 0.0
-        if fast and self.rate is not None and mark.epoch == self._epoch:
+        # An early ACK after the peer's data crossed the interval is that
+        # data's doing (the ACK behind a reply arrives late, the next one
+        # early), not a faster line: on a 9600 bit/s line with an arm's
+        # telemetry coming back, such ACKs ramped the rate to four times the
+        # line, and the timers it drove fired on every packet.
+        if fast and not tainted and self.rate is not None and mark.epoch == self._epoch:
             if self._offset_epoch != self._epoch and self._pushed:
                 # The model put this packet's departure too late.  First
                 # assume an offset (the end of a long queue misplaced by a
@@ -365,6 +373,8 @@ class RateEstimator:
                 ceiling = max(self.rate, RAMP_MAX * (self.measured or 0.0))
                 ramped = min(self.rate * self._ramp(mark, now, wire_bytes), ceiling)
                 if ramped > self.rate:
+                    if self._ramped_from is None:
+                        self._ramped_from = self.rate
                     self.rate = ramped
                     self.raises += 1
                     changed = True
@@ -427,6 +437,28 @@ class RateEstimator:
         if tx <= 0:
             return RAMP_MAX
         return min(max(wire_bytes / tx / self.rate, RAMP_MIN), RAMP_MAX)
+
+    def on_timeout(self) -> bool:
+        """A retransmission timer fired.  If the rate was ramped on early ACKs
+        alone and no busy run has confirmed it since, the ramp is the likelier
+        culprit than the line: the model drains faster than the line, and the
+        queue it does not see delays every ACK past its timer.  (With the
+        peer's data on the way back -- an arm's telemetry -- that queue never
+        shows as queue lag, so nothing else corrects it: at 9600 bit/s and no
+        delay a rate ramped to twice the line stayed there, every timer fired,
+        and the duplicates starved the session for its dead time.)  Back to
+        the larger of the rate before the ramp and what was measured; returns
+        whether the rate changed."""
+        if self._ramped_from is None or self.rate is None:
+            return False
+        back = max(self._ramped_from, min(self.measured or 0.0, self.rate))
+        self._ramped_from = None
+        if back >= self.rate:
+            return False
+        self.rate = back
+        self.lowers += 1
+        self._epoch += 1
+        return True
 
     def pushed(self) -> None:
         """The endpoint moved the pacer's model later (a queue was found):

@@ -266,3 +266,25 @@ def test_early_packets_of_an_idle_sender_never_ramp_the_rate_without_bound() -> 
     assert est.rate is not None
     assert est.measured is not None
     assert est.rate <= 4 * max(240.0, est.measured)
+
+
+def test_a_timeout_undoes_a_ramp_no_busy_run_confirmed() -> None:
+    """Early ACKs ramp the rate; a retransmission timeout before any busy run
+    confirms it sends it back (the model ran ahead of the line).  Found on a
+    9600 bit/s line with an arm's telemetry on the way back: a rate ramped to
+    twice the line fired every timer (``linksim control --virtual`` with
+    wave.toml lost its session to the duplicates)."""
+    est = RateEstimator(960.0)
+    est.start(0.0, 0.1)
+    now = 0.0
+    for _ in range(6):  # early deliveries of a pacer-limited sender: ramps
+        est.hand(129)
+        mark = est.mark(now)
+        assert mark is not None
+        now += 0.2
+        est.on_delivery(mark, now, 0.01, 0.1, fast=True, wire_bytes=129)
+    assert est.rate is not None
+    assert est.rate > 960.0
+    assert est.on_timeout()
+    assert est.rate == max(960.0, min(est.measured or 0.0, est.rate))
+    assert not est.on_timeout()  # once: the next timeout is the line's own
