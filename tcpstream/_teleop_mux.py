@@ -20,6 +20,13 @@ Each channel is a :class:`trio.abc.Stream` (it passes trio's
 ``check_two_way_stream``).  Closing one sends its close frame: the peer's
 channel then reads EOF and its writes fail (``BrokenResourceError``), like a
 TCP connection's.  The end of the underlying stream ends both.
+
+**The expedited lane** (PROTOCOL.md 14.6, 15): when the underlying stream
+has one (a serial socket between telelink ends), the command channel offers
+it too -- each message goes on the stream's lane behind one byte naming the
+channel -- so the command session's EMERGENCY_STOP overtakes even the frame
+being written and whatever the transport holds.  The sample channel has no
+lane.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ from collections.abc import AsyncIterator
 
 import trio
 
+from ._pump import expedited_lane
+
 __all__ = ["COMMANDS", "MAX_FRAME", "TELEOP", "MuxChannel", "StreamMux", "open_mux"]
 
 COMMANDS = 0
@@ -41,6 +50,8 @@ MAX_QUEUED = 65536
 """Bytes one channel may hold unsent before ``send_all`` waits (flow control)."""
 MAX_UNREAD = 262144
 """Bytes received and not yet read on one channel before the mux stops reading the line."""
+MAX_LANE_UNREAD = 8
+"""Lane messages held for the command channel before the mux stops taking them."""
 _HEAD = struct.Struct("!BH")
 
 
@@ -58,6 +69,7 @@ class MuxChannel(trio.abc.Stream):
         self._sending = False
         self._receiving = False
         self._changed = trio.Event()
+        self._lane_in: list[bytes] = []
 
     def _notify(self) -> None:
         self._changed.set()
@@ -139,6 +151,36 @@ class MuxChannel(trio.abc.Stream):
         finally:
             self._receiving = False
 
+    @property
+    def expedited(self) -> bool:
+        """This channel has an expedited lane: the command channel, over a
+        stream that has one."""
+        return self.number == COMMANDS and self._mux._lane is not None
+
+    async def send_expedited(self, message: bytes | bytearray | memoryview) -> None:
+        """Send ``message`` on the stream's lane, ahead of every queued frame."""
+        lane = self._mux._lane
+        if lane is None or self.number != COMMANDS:
+            raise trio.BrokenResourceError("this channel has no expedited lane")
+        self._check_send()
+        await lane.send_expedited(bytes((self.number,)) + bytes(message))
+
+    async def receive_expedited(self) -> bytes:
+        """The next lane message for this channel; waits for one."""
+        await trio.lowlevel.checkpoint()
+        while True:
+            if self._closed:
+                raise trio.ClosedResourceError("this channel was closed")
+            if self._lane_in:
+                message = self._lane_in.pop(0)
+                self._mux._room()
+                return message
+            if self._broken is not None:
+                raise trio.BrokenResourceError("the line failed") from self._broken
+            if self._eof:
+                raise trio.BrokenResourceError("the peer closed this channel")
+            await self._changed.wait()
+
     async def aclose(self) -> None:
         if not self._closed:
             self._closed = True  # what is queued still goes, then the close frame
@@ -152,6 +194,7 @@ class StreamMux:
 
     def __init__(self, stream: trio.abc.Stream) -> None:
         self._stream = stream
+        self._lane = expedited_lane(stream)
         self.commands = MuxChannel(self, COMMANDS)
         self.teleop = MuxChannel(self, TELEOP)
         self._channels = (self.commands, self.teleop)
@@ -242,10 +285,33 @@ class StreamMux:
         except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
             self._fail(exc)
 
+    async def _lane_reader(self) -> None:
+        """Route the stream's lane messages to the command channel (the only
+        one with a lane); anything else is counted and dropped."""
+        lane = self._lane
+        assert lane is not None
+        try:
+            while True:
+                while len(self.commands._lane_in) >= MAX_LANE_UNREAD:
+                    self._room_event = trio.Event()
+                    await self._room_event.wait()  # unread: the transport's lane holds the rest
+                message = await lane.receive_expedited()
+                if message[:1] != bytes((COMMANDS,)):
+                    self.bad_frames += 1
+                    continue
+                self.commands._lane_in.append(message[1:])
+                self.commands._notify()
+        except (trio.BrokenResourceError, trio.ClosedResourceError):
+            # The connection ended: the stream's reader reports how (and a
+            # graceful end must stay an EOF, not turn into a failure here).
+            return
+
     async def run(self, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED) -> None:
         async with trio.open_nursery() as nursery:
             nursery.start_soon(self._reader)
             nursery.start_soon(self._writer)
+            if self._lane is not None:
+                nursery.start_soon(self._lane_reader)
             task_status.started()
 
 

@@ -34,6 +34,7 @@ from tcpstream.connection import (
     Role,
     ServerConnection,
 )
+from tcpstream.teleop import open_mux
 
 from .fakearm import FakeArm
 from .harness import KEY, run, trio_scheduler_rng
@@ -219,3 +220,47 @@ def test_an_arm_that_does_not_read_the_lane_gets_the_stop_on_the_stream() -> Non
     server.receive_data(client.data_to_send(), 10.5)
     event = server.next_event()
     assert type(event).__name__ == "EmergencyStopRequested"
+
+
+def test_over_the_teleoperation_mux_the_command_channel_keeps_the_lane() -> None:
+    """A serial line carrying both sessions (open_mux): the command session's
+    stop still goes on the serial socket's lane, overtaking queued commands
+    and every frame the mux holds; the sample channel has no lane."""
+    ep = endpoint_config_for(LINE)
+    arm = FakeArm(move_time=600.0)
+    out: dict[str, object] = {}
+
+    async def main() -> None:
+        with trio.fail_after(3600):
+            async with (
+                serial_socket_pair(LINE, endpoint=ep) as (c_end, a_end),
+                open_mux(c_end) as c_mux,
+                open_mux(a_end) as a_mux,
+                Server(arm, ServerConfig(key=KEY, rtt_hint=6.0, telemetry_every=1250)) as server,
+                trio.open_nursery() as nursery,
+            ):
+                assert c_mux.commands.expedited
+                assert not c_mux.teleop.expedited
+                nursery.start_soon(server.serve_stream, a_mux.commands)
+                async with connect_stream(
+                    c_mux.commands, key=KEY, identity="earth", handshake_timeout=60.0
+                ) as c:
+                    first = await c.submit(commands.move_joints([0.3] * 6))
+                    await first.accepted()
+                    behind = [await c.submit(commands.move_joint(1, 0.01 * i)) for i in range(6)]
+                    sent_at = trio.current_time()
+                    halts = len(arm.halt_times)
+                    await c.emergency_stop()
+                    out["halt_after"] = arm.halt_times[halts] - sent_at
+                    for handle in [first, *behind]:
+                        with pytest.raises(CommandFailed):
+                            await handle.completed()
+                    out["lane_out"] = c.statistics().connection.expedited_out
+                nursery.cancel_scope.cancel()
+        out["executed"] = len(arm.executed)
+
+    trio_scheduler_rng().seed(0)
+    run(main)
+    assert out["lane_out"] == 1
+    assert out["executed"] == 1
+    assert out["halt_after"] <= ONE_WAY + PACKET_TIME + 0.4  # type: ignore[operator]
