@@ -441,6 +441,23 @@ class Endpoint:
             )
         self._xsend.submit([f for f, _ in cut])
 
+    def offer_expedited(self, message: bytes | bytearray | memoryview, now: float) -> bool:
+        """:meth:`send_expedited`, except that a full lane returns False (nothing
+        queued; offer again after an acknowledgement) instead of raising.
+        What an I/O adapter's waiting send uses."""
+        if self._state is State.ESTABLISHED and self.expedited and self._xsend.full:
+            return False
+        self.send_expedited(message, now)
+        return True
+
+    @property
+    def expedited_over(self) -> str | None:
+        """Why no further expedited message can arrive (None while one can):
+        what an I/O adapter's waiting receive reports once the inbox is empty."""
+        if self._state in TERMINAL:
+            return f"the connection ended ({self._state.value}); no more expedited messages"
+        return None
+
     def read_expedited(self) -> bytes | None:
         """The next expedited message from the peer, whole, or None."""
         return self._xrecv.read()

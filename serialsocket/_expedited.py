@@ -101,6 +101,11 @@ class ExpeditedSender:
     _order: int = 0
 
     @property
+    def full(self) -> bool:
+        """:meth:`submit` would refuse: the queue of waiting messages is full."""
+        return len(self.waiting) >= EXPEDITED_QUEUE
+
+    @property
     def idle(self) -> bool:
         """Nothing waits and nothing is unacknowledged."""
         return not self.outstanding and not self.waiting
@@ -112,7 +117,7 @@ class ExpeditedSender:
             LocalProtocolError: :data:`EXPEDITED_QUEUE` messages already wait
                 for room in the window (the peer is not acknowledging).
         """
-        if len(self.waiting) >= EXPEDITED_QUEUE:
+        if self.full:
             raise LocalProtocolError(
                 f"{EXPEDITED_QUEUE} expedited messages already wait for the peer; "
                 "wait for one to be acknowledged"

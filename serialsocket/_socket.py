@@ -246,20 +246,14 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         while True:
             self._check_open()
             self._raise_if_broken()
-            ep = self._d.ep
-            if not ep.expedited:
-                raise trio.BrokenResourceError(
-                    "this connection has no expedited lane (the peer did not agree to one)"
-                )
             try:
-                ep.send_expedited(message, self._d.now())
-            except LocalProtocolError as exc:
-                if ep.state is not State.ESTABLISHED:
-                    raise trio.BrokenResourceError(str(exc)) from exc
-                await self._d.changed()  # the lane is full: wait for an acknowledgement
-                continue
-            self._d.notify()
-            return
+                queued = self._d.ep.offer_expedited(message, self._d.now())
+            except LocalProtocolError as exc:  # no lane, or the connection ended
+                raise trio.BrokenResourceError(str(exc)) from exc
+            if queued:
+                self._d.notify()
+                return
+            await self._d.changed()  # the lane is full: wait for an acknowledgement
 
     async def receive_expedited(self) -> bytes:
         """The peer's next expedited message, whole; waits (cancellably) for one.
@@ -276,10 +270,8 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             if message is not None:
                 return message
             self._raise_if_broken()
-            if self._d.ep.state in TERMINAL:
-                raise trio.BrokenResourceError(
-                    f"the connection ended ({self._d.ep.state.value}); no more expedited messages"
-                )
+            if (over := self._d.ep.expedited_over) is not None:
+                raise trio.BrokenResourceError(over)
             await self._d.changed()
 
     async def aclose(self) -> None:
