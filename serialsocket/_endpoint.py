@@ -1021,7 +1021,7 @@ class Endpoint:
         base = self._rate.base_rtt
         for pkt in delivered:
             rtt = now - pkt.done_at
-            early = not self._rate.plausible(rtt) or self._rate.fast_evidence(
+            early = not self._rate.plausible(rtt, self._rtt.rttvar) or self._rate.fast_evidence(
                 rtt, self._tx(len(pkt.wire)), self._rtt.rttvar
             )
             if not early:

@@ -534,14 +534,19 @@ def test_effective_window_covers_the_repair_horizon() -> None:
     # runs on the line, so what it measures agrees with the physical round trip
     # 2.6 + 139/240 = 3.179 s: ceil(3 x 3.179 / 0.5375) + 5 = 18 + 5 = 23 packets.
     # (A round trip measured below the hinted one wins: the hint was too long.)
-    def effective(line_rate: float | None, window: int) -> int:
-        cfg = EndpointConfig(one_way_delay=1.3, line_rate=line_rate, window=window)
+    # With long sequence numbers (offered by default) the bound covers a
+    # resend lost twice: ceil(6 x 3.179 / 0.5375) + 5 = 36 + 5 = 41 packets.
+    def effective(line_rate: float | None, window: int, long_window: int | None = None) -> int:
+        cfg = EndpointConfig(
+            one_way_delay=1.3, line_rate=line_rate, window=window, long_window=long_window
+        )
         a, _b, _t = connected_on_line(cfg, 1.3, line_rate or 2400)
         return a.statistics().effective_window
 
     assert effective(line_rate=2400, window=31) == 23
     assert effective(line_rate=2400, window=16) == 16
     assert effective(line_rate=None, window=31) == 31  # unknown rate: only the window
+    assert effective(line_rate=2400, window=31, long_window=131071) == 41
 
 
 def test_paced_output_on_a_slow_line() -> None:

@@ -288,3 +288,40 @@ def test_a_timeout_undoes_a_ramp_no_busy_run_confirmed() -> None:
     assert est.on_timeout()
     assert est.rate == max(960.0, min(est.measured or 0.0, est.rate))
     assert not est.on_timeout()  # once: the next timeout is the line's own
+
+
+def test_a_sample_short_by_less_than_a_read_batch_is_not_a_faster_line() -> None:
+    """The init's answer was read up to a read batch late, and so is every
+    ACK: at 9600 bit/s, 0.27 s one way, an ACK read 2 ms after it arrived
+    came out 1 ms shorter than the init exchange allowed.  Judged impossible,
+    it was taken as proof of a faster line: the rate doubled every few
+    seconds, the queue that built timed out every packet in flight, and the
+    resends kept it full (0.942 of the limit, 138 timeouts, with exact
+    hints).  A deficit within the jitter allowance proves nothing."""
+    est = RateEstimator(960.0)
+    est.hand(38)  # the init
+    est.start(0.6463, 0.6463)  # its answer, read 16 ms late
+    strict = 0.6463 - 2 * 38 / 960.0 - 0.01
+    assert not est.plausible(strict - 0.001)
+    assert est.plausible(strict - 0.001, rttvar=0.02)
+    assert not est.plausible(strict - 0.05, rttvar=0.02)
+
+
+def test_exact_hints_on_a_short_fast_line_never_ramp_into_a_timeout_storm() -> None:
+    payload = random.Random(8).randbytes(60_000)
+    m = simulate(
+        payload,
+        rate=9600,
+        delay=0.27,
+        byte_error_rate=1e-4,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=1,
+        time_cap=2_000,
+        hints="exact",
+    )
+    assert m.end == "complete"
+    assert m.long_sequence  # offered whatever the hints say
+    assert m.timeouts <= 2, m
