@@ -18,6 +18,7 @@ import trio
 
 from linksim import serial_socket_pair
 from linksim.link import DirectionConfig, LinkConfig, endpoint_config_for
+from serialsocket._pacer import HORIZON_CAP
 from tcpstream import (
     CommandFailed,
     FailureReason,
@@ -44,6 +45,11 @@ LINE = LinkConfig.symmetric(DirectionConfig(rate=2400, delay=1.3), seed=1)
 ONE_WAY = 1.3
 PACKET_TIME = 129 * 10 / 2400  # a full 128-character packet and its CR
 BOUND = ONE_WAY + PACKET_TIME + 0.2
+# The worst case, term by term: the stop pressed just as a data packet
+# started waits for that packet, the pacer's horizon (HORIZON_CAP), its own
+# line time (at most 60 characters with its random tag) and the UART's FIFO
+# timeout at the arm (16 characters).
+WORST = ONE_WAY + PACKET_TIME + HORIZON_CAP + 60 * 10 / 2400 + 16 * 10 / 2400
 
 
 def _nonces(seed: int) -> object:
@@ -110,10 +116,12 @@ def _stop_run(*, lane: bool, keyed: bool, phase: float, queued: int = 6) -> dict
 def test_the_stop_overtakes_queued_commands_and_none_of_them_runs(keyed: bool) -> None:
     """Pressed at twelve moments across a packet's transmission: the median
     stop is within one way + one packet time + 0.2 s (the issue's figure),
-    the worst within 0.4 s instead of 0.2 -- when the stop is pressed just
+    the worst within WORST (2.25 s) instead -- when the stop is pressed just
     as a data packet started, the pacer's 0.1 s horizon, the stop's own line
     time (0.18 s unkeyed, 0.24 s with its random tag) and the UART's FIFO
-    timeout at the arm (16 characters, 0.07 s) come on top of that packet."""
+    timeout at the arm (16 characters, 0.07 s) come on top of that packet.
+    (Measured with long sequence numbers, offered by default since: keyed
+    1.69-2.25 s, median 1.92; unkeyed 1.65-2.14 s, median 1.84.)"""
     delays = []
     for i in range(12):
         out = _stop_run(lane=True, keyed=keyed, phase=0.05 * i)
@@ -127,7 +135,7 @@ def test_the_stop_overtakes_queued_commands_and_none_of_them_runs(keyed: bool) -
         delays.append(out["halt_after"])
     print(f"keyed={keyed}: stop to halt, s: {sorted(round(d, 3) for d in delays)}")
     assert statistics.median(delays) <= BOUND, delays  # type: ignore[type-var]
-    assert max(delays) <= ONE_WAY + PACKET_TIME + 0.4, delays  # type: ignore[type-var]
+    assert max(delays) <= WORST, delays  # type: ignore[type-var]
 
 
 def test_without_the_lane_the_stop_waits_behind_the_queue() -> None:
