@@ -36,7 +36,13 @@ from collections import deque
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
-from ._config import _ACK_WIRE, MAX_WINDOW, UNMEASURED_DEAD_AFTER, EndpointConfig
+from ._config import (
+    _ACK_WIRE,
+    IDLE_COPY_MIN_PACKETS,
+    MAX_WINDOW,
+    UNMEASURED_DEAD_AFTER,
+    EndpointConfig,
+)
 from ._encoding import PRINTABLE
 from ._errors import LocalProtocolError, RemoteProtocolError
 from ._events import (
@@ -105,6 +111,10 @@ _DAMAGE = frozenset(
     }
 )
 _ERROR_TEXT_MAX = 80
+
+DOUBLE_FROM_COPY = 3
+"""The copy of a packet from which a resend goes out twice on a long line:
+the third (its first resend was lost too)."""
 
 LONG_REPAIR_ROUND_TRIPS = 6
 """Round trips of packets kept unacknowledged with long sequence numbers (the
@@ -195,6 +205,12 @@ class EndpointStatistics:
     """Expedited fragments sent and not yet acknowledged, plus messages waiting."""
     expedited_refused: int = 0
     """Expedited fragments not taken because the inbox was full (resent later)."""
+    idle_copies: int = 0
+    """Extra copies of unacknowledged packets sent while the line would have
+    idled (``EndpointConfig.idle_copies``); not counted as retransmissions."""
+    doubled_resends: int = 0
+    """Resends of packets already resent once, sent twice on a long line
+    (PROTOCOL.md 4.4); the second copy is not counted in ``retransmissions``."""
 
 
 class Endpoint:
@@ -237,6 +253,7 @@ class Endpoint:
     _answer_sent_at: float
     _answers: int
     _window_key: tuple[int, float | None, int, float | None] | None
+    _backlog_at: float
     _window_cached: int
     _long_seq: bool
     _buffer_capped: bool
@@ -286,6 +303,8 @@ class Endpoint:
                 "out_of_window",
                 "dropped_buffer_full",
                 "ignored_packets",
+                "idle_copies",
+                "doubled_resends",
             ),
             0,
         )
@@ -683,6 +702,8 @@ class Endpoint:
             expedited_received=self._xrecv.messages_received,
             expedited_unacknowledged=len(self._xsend.outstanding) + len(self._xsend.waiting),
             expedited_refused=self._xrecv.refused,
+            idle_copies=c["idle_copies"],
+            doubled_resends=c["doubled_resends"],
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -729,6 +750,7 @@ class Endpoint:
         self._answer_sent_at = 0.0
         self._answers = 0
         self._window_key = None
+        self._backlog_at = -math.inf
         self._window_cached = 1
         self._long_seq = False
         self._buffer_capped = False
@@ -1007,8 +1029,7 @@ class Endpoint:
         self._take_samples(now)
         if self._sender.packets_acked > acked:
             self._rtt.on_progress()
-        if self._sender.fast_retransmit_count > fast:
-            self._counters["fast_retransmits"] += 1
+        self._counters["fast_retransmits"] += self._sender.fast_retransmit_count - fast
         if poll:
             self._queue_ack(self._receiver.last_in_order())
         self._check_closed(now)
@@ -1263,10 +1284,57 @@ class Endpoint:
 
     def _pacing_wake(self) -> float | None:
         s = self._sender
-        wants = s.has_retransmit() or (s.has_new_data() and s.room(self._effective_window()) > 0)
+        wants = (
+            s.has_retransmit()
+            or (s.has_new_data() and s.room(self._effective_window()) > 0)
+            or self._copy_due() is not None
+        )
         if not wants:
             return None
         return self._pacer.wake()
+
+    def _copy_due(self) -> Outstanding | None:
+        """The packet an idle line should carry another copy of, if any
+        (PROTOCOL.md 4.4): no resend waits, the rate is known (so the pacer
+        knows the line is idle) and no queue is measured in front of it, the
+        round trip is long against a packet, and nothing new can go -- none
+        is queued (then the newest packets first), or the window is full
+        (then the packet at its base)."""
+        s = self._sender
+        limit = self.config.idle_copies
+        if (
+            limit == 0
+            or self._state is not State.ESTABLISHED
+            or not s.in_flight()
+            or s.has_retransmit()
+            or self._rate.rate is None
+            or self._rate.queue_delay > 0
+            or not self._long_line()
+            or self._clock - self._backlog_at > 2 * self._rtt_or_path()
+        ):
+            # The last condition: only a bulk sender's line is worth it --
+            # one whose data waited for the line within two round trips.  A
+            # command channel or a stream of teleoperation samples sends
+            # as the line allows and never queues; copies there would only
+            # make its next packet wait behind them.
+            return None
+        if not s.has_new_data():
+            return s.peek_copy(limit)
+        if s.room(self._effective_window()) <= 0:
+            # A full window is a packet (or a run of them) at its base the
+            # peer has not acknowledged: one that has cost a round trip
+            # already, and holds everything behind it.
+            return s.peek_base_copy(limit)
+        return None
+
+    def _rtt_or_path(self) -> float:
+        return max(self._rtt.srtt or 0.0, self._min_rtt())
+
+    def _long_line(self) -> bool:
+        """The round trip is at least IDLE_COPY_MIN_PACKETS full packets:
+        waiting for a repair costs many packet times of line."""
+        tx = self._tx(self._full_wire)
+        return tx > 0 and self._rtt_or_path() >= IDLE_COPY_MIN_PACKETS * tx
 
     def _release_expedited(self, now: float, out: list[bytes]) -> None:
         """Expedited fragments go out at once, ahead of paced data: they wait
@@ -1294,11 +1362,25 @@ class Endpoint:
             assert pkt is not None
             self._counters["retransmissions"] += 1
             self._transmit(pkt, now, timeout, out)
+            if (
+                pkt.transmissions >= DOUBLE_FROM_COPY or not s.has_new_data()
+            ) and self._long_line():
+                # Lost on its resend too: it has held the window's base for
+                # two round trips, and a third loss would add another.  Two
+                # copies back to back make that one in 400 instead of one
+                # in 20 (512 characters at 1e-4), for a packet of line time
+                # in one of 400.  With nothing new to send (the end of a
+                # transfer) every resend goes twice: the line would idle.
+                self._counters["doubled_resends"] += 1
+                self._transmit(pkt, now, timeout, out)
         if s.has_retransmit():
             return
         while self._pacer.has_room(now):
             room = s.room(self._effective_window())
-            if room <= 0 or not s.has_new_data():
+            if not s.has_new_data() or room <= 0:
+                if s.has_new_data():
+                    self._backlog_at = now
+                self._release_copies(now, timeout, out)
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
@@ -1318,10 +1400,22 @@ class Endpoint:
                     Packet(seq=seq, type=PacketType.EOF, data=head), self._send_check
                 )
                 self._transmit(s.add(wire, 0, eof=True), now, timeout, out)
+        if s.has_new_data():
+            self._backlog_at = now  # the line, not the application, is the limit
+
+    def _release_copies(self, now: float, timeout: float, out: list[bytes]) -> None:
+        """Fill an idle line with copies of unacknowledged packets, newest
+        first.  A copy is a retransmission on the wire; its timer runs from
+        the copy, and its ACK gives no round-trip sample (Karn)."""
+        while self._pacer.has_room(now) and (pkt := self._copy_due()) is not None:
+            self._sender.take_copy(pkt, walk=not self._sender.has_new_data())
+            self._counters["idle_copies"] += 1
+            self._transmit(pkt, now, timeout, out)
 
     def _transmit(self, pkt: Outstanding, now: float, timeout: float, out: list[bytes]) -> None:
         out.append(pkt.wire)
         pkt.transmissions += 1
+        self._sender.note_sent(pkt)
         pkt.done_at = self._account(pkt.wire, now)
         if pkt.transmissions == 1:
             pkt.mark = self._rate.mark(now)

@@ -21,7 +21,12 @@ A packet is retransmitted when
 * its timer expires (deadline = moment it finished leaving the UART + timeout);
 * the peer NAKs it, unless the NAK came too soon to be about our last copy;
 * an ACK shows the peer holds a later packet but still expects this one
-  (fast retransmit: a serial line never reorders, so the packet was lost).
+  (fast retransmit: a serial line never reorders, so the packet was lost);
+* the ACK of a packet whose first copy left after this packet's last copy
+  arrives while this one is unacknowledged: the line and the peer's ACKs
+  are both first in, first out, so this copy's ACK would have come first
+  (time-order loss detection, as TCP's RACK; it finds every hole, not only
+  the first).
 
 With long sequence numbers thousands of packets may be outstanding, so no
 per-event operation walks them all: unacknowledged packets are counted, the
@@ -55,6 +60,10 @@ class Outstanding:
         transmissions: copies sent so far.
         acked: acknowledged (kept until the window slides past it).
         mark: what the rate estimator knew when the first copy left.
+        copies: idle copies sent (see :meth:`Sender.peek_copy`).
+        sent_index: when its last copy was handed to the line, as a count
+            of all copies handed so far (:meth:`Sender.note_sent`).
+        first_index: the same for its first copy.
     """
 
     seq: int
@@ -66,6 +75,9 @@ class Outstanding:
     transmissions: int = 0
     acked: bool = False
     mark: RateMark | None = None
+    copies: int = 0
+    sent_index: int = 0
+    first_index: int = 0
 
 
 class Sender:
@@ -91,7 +103,8 @@ class Sender:
         acknowledged, queued again, or re-armed with another deadline."""
         self._unacked = 0
         self.fast_retransmit_count = 0
-        """Packets queued again because a later packet's ACK proved them lost."""
+        """Packets queued again because a later packet's ACK proved them lost
+        (the cumulative hole, or time-order loss detection)."""
         self.eof_requested = False
         self.eof_sent = False
         self.eof_acked = False
@@ -100,6 +113,15 @@ class Sender:
         self.bytes_in_flight = 0
         self.base_advanced_at = -math.inf
         """When an ACK last moved the window's base: the line delivers in order."""
+        self._sent_count = 0
+        self._sent_order: deque[tuple[int, int]] = deque()
+        """(sent_index, seq) of every copy handed to the line, oldest first;
+        entries leave at the head once a later copy is acknowledged."""
+        self._copy_top = 0
+        self._copy_cursor = 0
+        self._copy_round = 1
+        """The walk :meth:`peek_copy` makes: down from the newest packet
+        (``_copy_top`` - 1 when it began) to the base, once per round."""
         self.delivered: list[Outstanding] = []
         """Packets whose only copy was acknowledged since the endpoint last
         took them (:meth:`take_delivered`): the ACK clock's samples."""
@@ -170,7 +192,11 @@ class Sender:
         base = self.base
         seq = self.resolve(seq_mod)
         if seq is not None:
+            own = self.outstanding[seq]
             self._ack_one(seq, now, samples, own=True)
+            # Whichever copy this ACK is for, it left no earlier than the
+            # first: copies handed before that one would have been answered.
+            self._losses_before(own.first_index)
         if cum_mod is not None:
             offset = (cum_mod - self.base) % self.modulus
             if offset <= self.next - self.base:
@@ -200,6 +226,34 @@ class Sender:
         if self.base > base:
             self.base_advanced_at = now
         return samples
+
+    def note_sent(self, pkt: Outstanding) -> None:
+        """A copy of ``pkt`` was handed to the line (after this call, its
+        timer is armed by the caller)."""
+        self._sent_count += 1
+        pkt.sent_index = self._sent_count
+        if not pkt.first_index:
+            pkt.first_index = self._sent_count
+        self._sent_order.append((self._sent_count, pkt.seq))
+
+    def _losses_before(self, index: int) -> None:
+        """The copy handed at ``index`` was acknowledged: every copy handed
+        before it whose packet is still unacknowledged was lost (or its ACK
+        was: a spare copy then, which the peer drops as a duplicate)."""
+        order = self._sent_order
+        while order and order[0][0] < index:
+            sent, seq = order.popleft()
+            pkt = self.outstanding.get(seq)
+            if (
+                pkt is None
+                or pkt.acked
+                or pkt.sent_index != sent  # a later copy is on its way
+                or pkt.deadline is None
+                or seq in self._queued
+            ):
+                continue
+            self.schedule(seq)
+            self.fast_retransmit_count += 1
 
     def on_nak(self, seq_mod: int, now: float, min_rtt: float) -> None:
         """Apply a NAK: resend that packet unless our last copy is still on its way.
@@ -337,6 +391,63 @@ class Sender:
         while timers and not self._timer_valid(*timers[0]):
             heapq.heappop(timers)
         return timers[0][0] if timers else None
+
+    # -- idle copies --------------------------------------------------------------------
+
+    def peek_copy(self, limit: int) -> Outstanding | None:
+        """The packet an idle line should carry another copy of, or None.
+
+        Candidates are unacknowledged, on the line (not waiting for a
+        resend) and copied fewer than ``limit`` times.  Newest first, one
+        round of copies at a time: a newer packet's loss would be revealed
+        latest (the newest has no later packet to reveal it at all, only its
+        timer), so its copy saves the most waiting.  The walk goes down from
+        the newest packet to the base and starts again at the top for the
+        next round, or when packets were sent since; each step passes a
+        packet for good in that round, so a round costs one pass over the
+        window however often it is asked.
+        """
+        if self._copy_top != self.next:
+            self._copy_top = self.next
+            self._copy_cursor = self.next - 1
+            self._copy_round = 1
+        while self._copy_round <= limit:
+            while self._copy_cursor >= self.base:
+                pkt = self.outstanding.get(self._copy_cursor)
+                if (
+                    pkt is not None
+                    and not pkt.acked
+                    and pkt.deadline is not None
+                    and pkt.seq not in self._queued
+                    and pkt.copies < self._copy_round
+                ):
+                    return pkt
+                self._copy_cursor -= 1
+            self._copy_round += 1
+            self._copy_cursor = self.next - 1
+        return None
+
+    def peek_base_copy(self, limit: int) -> Outstanding | None:
+        """The packet at the window's base, if it may be copied (as
+        :meth:`peek_copy`'s candidates): with the window full, it is the
+        one holding everything behind it."""
+        pkt = self.outstanding.get(self.base)
+        if (
+            pkt is None
+            or pkt.acked
+            or pkt.deadline is None
+            or pkt.seq in self._queued
+            or pkt.copies >= limit
+        ):
+            return None
+        return pkt
+
+    def take_copy(self, pkt: Outstanding, *, walk: bool = True) -> None:
+        """``pkt`` (from :meth:`peek_copy`, or :meth:`peek_base_copy` with
+        ``walk`` False) is being copied onto the line."""
+        pkt.copies += 1
+        if walk:
+            self._copy_cursor = pkt.seq - 1
 
     def unsent_bytes(self) -> int:
         """Bytes queued by the application that never left."""
