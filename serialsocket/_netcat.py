@@ -193,6 +193,8 @@ class _Tally:
             "retransmissions": st.retransmissions,
             "timeouts": st.timeouts,
             "fast_retransmits": st.fast_retransmits,
+            "idle_copies": st.idle_copies,
+            "doubled_resends": st.doubled_resends,
             "naks_sent": st.naks_sent,
             "check_failures": st.check_failures,
             "garbage_bytes": st.garbage_bytes,
