@@ -30,21 +30,24 @@ def _simulate(
     hints: str,
     *,
     payload: bytes = PAYLOAD,
+    rate: float = RATE,
     delay: float = DELAY,
     byte_error_rate: float = 1e-4,
     time_cap: float = 20_000,
+    seed: int = 3,
 ) -> Measurement:
-    """PAYLOAD (or ``payload``) one way at RATE, seeded, the defaults otherwise."""
+    """PAYLOAD (or ``payload``) one way at RATE (or ``rate``), seeded, the
+    defaults otherwise."""
     return simulate(
         payload,
-        rate=RATE,
+        rate=rate,
         delay=delay,
         byte_error_rate=byte_error_rate,
         burst=None,
         window=31,
         max_len=None,
         encoding=PRINTABLE,
-        seed=3,
+        seed=seed,
         time_cap=time_cap,
         hints=hints,
     )
@@ -309,19 +312,7 @@ def test_a_sample_short_by_less_than_a_read_batch_is_not_a_faster_line() -> None
 
 def test_exact_hints_on_a_short_fast_line_never_ramp_into_a_timeout_storm() -> None:
     payload = random.Random(8).randbytes(60_000)
-    m = simulate(
-        payload,
-        rate=9600,
-        delay=0.27,
-        byte_error_rate=1e-4,
-        burst=None,
-        window=31,
-        max_len=None,
-        encoding=PRINTABLE,
-        seed=1,
-        time_cap=2_000,
-        hints="exact",
-    )
+    m = _simulate("exact", payload=payload, rate=9600, delay=0.27, time_cap=2_000, seed=1)
     assert m.end == "complete"
     assert m.long_sequence  # offered whatever the hints say
     assert m.timeouts <= 2, m
