@@ -28,7 +28,7 @@ from ._kermit import TransferSetup, bad_pairing, run_bench_kermit, run_kermit_ta
 from ._kermit import run_transfer as run_kermit_transfer
 from ._latency import TRANSPORTS as LATENCY_TRANSPORTS
 from ._latency import run as run_latency
-from ._plot import plot_ber, plot_both, plot_delay
+from ._plot import plot_ber, plot_both, plot_delay, plot_delay_range
 from ._pty import DEFAULT_LENGTHS as PTY_LENGTHS
 from ._pty import PORTS as PTY_PORTS
 from ._pty import run_bench_pty
@@ -60,6 +60,7 @@ __all__ = [
     "plot_ber",
     "plot_both",
     "plot_delay",
+    "plot_delay_range",
     "run_bench_kermit",
     "run_bench_pty",
     "run_codec",

@@ -35,6 +35,7 @@ from linksim.bench import (
     plot_ber,
     plot_both,
     plot_delay,
+    plot_delay_range,
     run_bench_kermit,
     run_bench_pty,
     run_codec,
@@ -209,6 +210,12 @@ def add_goodput_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--plot-delay", type=Path, metavar="FILE.png", help="the delay view alone")
     ap.add_argument("--plot-ber", type=Path, metavar="FILE.png", help="the error-rate view alone")
+    ap.add_argument(
+        "--plot-delay-range",
+        type=Path,
+        metavar="FILE.png",
+        help="ratio to the limit against delay, 0 to 1200 s (rows of --sweep delay-range)",
+    )
 
 
 def _print_goodput_table(rows: Sequence[dict[str, Any]]) -> None:
@@ -277,8 +284,10 @@ def goodput_main(args: argparse.Namespace) -> int:
         sys.stdout.write(summarize(rows))
     else:
         _print_goodput_table(rows)
-    if args.plot or args.plot_delay or args.plot_ber:
+    if args.plot or args.plot_delay or args.plot_ber or args.plot_delay_range:
         try:
+            if args.plot_delay_range:
+                plot_delay_range(rows, args.plot_delay_range)
             if args.plot:
                 plot_both(rows, args.plot)
             if args.plot_delay:
@@ -287,6 +296,14 @@ def goodput_main(args: argparse.Namespace) -> int:
                 plot_ber(rows, args.plot_ber)
         except PlotUnavailable as exc:
             print(f"linksim bench goodput: {exc}", file=sys.stderr)
+            return 2
+        except OSError as exc:
+            # The rows were printed (and --output written): only the image failed.
+            print(
+                f"linksim bench goodput: cannot write the plot: {exc.strerror}: "
+                f"{exc.filename} (check that its folder exists and is writable)",
+                file=sys.stderr,
+            )
             return 2
     return 0 if all(r["ok"] for r in rows) else 1
 

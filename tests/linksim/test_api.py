@@ -175,6 +175,7 @@ SUB_PACKAGE_NAMES = {
         "plot_ber",
         "plot_both",
         "plot_delay",
+        "plot_delay_range",
         "run_bench_kermit",
         "run_bench_pty",
         "run_codec",

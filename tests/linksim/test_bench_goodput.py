@@ -53,12 +53,12 @@ TINY = [
 ]
 
 
-def _bench(*args: str) -> subprocess.CompletedProcess[bytes]:
+def _bench(*args: str, check: bool = True) -> subprocess.CompletedProcess[bytes]:
     return subprocess.run(
         [sys.executable, "-m", "linksim", "bench", "goodput", *args],
         capture_output=True,
         timeout=120,
-        check=True,
+        check=check,
     )
 
 
@@ -113,6 +113,34 @@ def test_plot_writes_png(tmp_path: Path) -> None:
     _bench("--from-json", str(rows), "--plot", str(png), "--plot-delay", str(delay))
     for path in (png, delay):
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_delay_range_plot_reads_the_sweep_rows(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    rows = json.loads(_bench(*TINY, "--json").stdout.decode())
+    sweep = []
+    for delay in (0.0, 20.0, 1200.0):
+        for ber in (0.0, 1e-4):
+            point = {"one_way_delay_s": delay, "byte_error_rate": ber, "sweeps": ["delay-range"]}
+            sweep.append({**rows[0], **point})
+    saved = tmp_path / "rows.json"
+    saved.write_text(json.dumps(sweep))
+    png = tmp_path / "r.png"
+    _bench("--from-json", str(saved), "--plot-delay-range", str(png))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Rows of other sweeps only: a clear error, exit 2.
+    saved.write_text(json.dumps(rows))
+    failed = _bench("--from-json", str(saved), "--plot-delay-range", str(png), check=False)
+    assert failed.returncode == 2
+    assert b"--sweep delay-range" in failed.stderr
+    # A folder that does not exist: one line saying so, exit 2, no traceback.
+    nowhere = tmp_path / "no-such-folder" / "r.png"
+    for option in ("--plot", "--plot-delay-range"):
+        saved.write_text(json.dumps(sweep))
+        failed = _bench("--from-json", str(saved), option, str(nowhere), check=False)
+        assert failed.returncode == 2
+        assert b"Traceback" not in failed.stderr
+        assert b"cannot write the plot" in failed.stderr
 
 
 def test_plot_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
