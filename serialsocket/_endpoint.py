@@ -273,7 +273,7 @@ class Endpoint:
             check=cfg.check,
             encoding=cfg.encoding,
             timeout_hint=cfg.initial_timeout(),
-            long_window=self._long_offer() if cfg.needs_long_window() else None,
+            long_window=self._long_offer(),
             features=cfg.init_features(),  # XCAPAS offers (PROTOCOL.md 10)
         )
         self._parser = PacketParser(
@@ -984,7 +984,7 @@ class Endpoint:
         when the window was narrowed below 31 (1 is the paper's stop-and-wait:
         the window the user wants; long numbers only lift the ceiling)."""
         cfg = self.config
-        return cfg.long_window if cfg.window == MAX_WINDOW else None
+        return cfg.long_window if cfg.needs_long_window() else None
 
     def _split_seq(self, packet: Packet) -> tuple[int, bytes] | None:
         """``(sequence number on the wire, the rest of the data field)``.

@@ -414,13 +414,7 @@ class Sender:
         while self._copy_round <= limit:
             while self._copy_cursor >= self.base:
                 pkt = self.outstanding.get(self._copy_cursor)
-                if (
-                    pkt is not None
-                    and not pkt.acked
-                    and pkt.deadline is not None
-                    and pkt.seq not in self._queued
-                    and pkt.copies < self._copy_round
-                ):
+                if pkt is not None and self._copyable(pkt, self._copy_round):
                     return pkt
                 self._copy_cursor -= 1
             self._copy_round += 1
@@ -432,15 +426,17 @@ class Sender:
         :meth:`peek_copy`'s candidates): with the window full, it is the
         one holding everything behind it."""
         pkt = self.outstanding.get(self.base)
-        if (
-            pkt is None
-            or pkt.acked
-            or pkt.deadline is None
-            or pkt.seq in self._queued
-            or pkt.copies >= limit
-        ):
-            return None
-        return pkt
+        return pkt if pkt is not None and self._copyable(pkt, limit) else None
+
+    def _copyable(self, pkt: Outstanding, below: int) -> bool:
+        """Unacknowledged, on the line (not waiting for a resend), and
+        copied fewer than ``below`` times."""
+        return (
+            not pkt.acked
+            and pkt.deadline is not None
+            and pkt.seq not in self._queued
+            and pkt.copies < below
+        )
 
     def take_copy(self, pkt: Outstanding, *, walk: bool = True) -> None:
         """``pkt`` (from :meth:`peek_copy`, or :meth:`peek_base_copy` with
