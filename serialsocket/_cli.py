@@ -289,6 +289,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: Sequence[str] | None) -> int:
     args = _parse(argv)
     try:
+        return _dispatch(args)
+    except KeyboardInterrupt:
+        # Ctrl-C: the run unwound through its cleanup (the link's and the
+        # files' ``finally`` blocks); one line, and the status a shell gives.
+        print(f"serialsocket {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    try:
         if args.command in ("listen", "connect"):
             return netcat_main(args, listening=args.command == "listen")
         if args.command == "kermit":

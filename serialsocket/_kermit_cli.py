@@ -14,10 +14,9 @@ import logging
 import sys
 from dataclasses import asdict
 
-import trio
-
 from ._checks import BlockCheck
 from ._errors import LocalProtocolError
+from ._interrupt import run_interruptibly
 from ._port import open_port
 from .argtypes import (
     BAUD,
@@ -229,7 +228,7 @@ def kermit_main(args: argparse.Namespace) -> int:
         logging.getLogger("serialsocket.kermit").setLevel(logging.DEBUG)
     try:
         config = _config(args)
-        stats = trio.run(_run, args, config)
+        stats = run_interruptibly(_run, args, config)
     except LocalProtocolError as exc:
         print(f"serialsocket kermit: {exc}", file=sys.stderr)
         return 2

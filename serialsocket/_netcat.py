@@ -43,6 +43,7 @@ from ._driver import LinkBroken
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._hayes import DialError, ModemConnection, answer, dial
+from ._interrupt import run_interruptibly
 from ._port import open_port
 from ._socket import SerialSocket, accept, connect
 from ._trace import TracingStream
@@ -370,7 +371,7 @@ def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally)
     """The run itself; returns the exit status (reports are the caller's)."""
     try:
         try:
-            trio.run(_run, args, listening, tally)
+            run_interruptibly(_run, args, listening, tally)
         except BaseExceptionGroup as group:
             raise _first_leaf(group) from None
     except LocalProtocolError as exc:
@@ -388,8 +389,7 @@ def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally)
         _fail(name, str(exc), tally)
         return 1
     except KeyboardInterrupt:
-        if tally.sock is not None:
-            _fail(name, "interrupted", tally)
+        _fail(name, "interrupted", tally)
         return 130
     return 0
 

@@ -11,8 +11,6 @@ import logging
 import math
 import sys
 
-import trio
-
 import serialsocket
 from linksim.arm import SimulatedArm
 from linksim.demo import serve_arm_serial, serve_arm_tcp
@@ -23,6 +21,7 @@ from linksim.link import (
     endpoint_overrides,
     server_config_for,
 )
+from serialsocket._interrupt import run_interruptibly
 from serialsocket.capture import CaptureFile
 from tcpstream import Server
 
@@ -144,7 +143,7 @@ def arm_server_main(args: argparse.Namespace) -> int:
     try:
         if args.capture:
             capture = CaptureFile(args.capture)
-        trio.run(main)
+        run_interruptibly(main)
     except KeyboardInterrupt:
         return 0
     except (OSError, serialsocket.DialError) as exc:

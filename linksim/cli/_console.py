@@ -15,8 +15,6 @@ import json
 import sys
 from functools import partial
 
-import trio
-
 import serialsocket
 from linksim._errors import ConfigError
 from linksim._plotting import PlotUnavailable
@@ -39,6 +37,7 @@ from linksim.demo import (
     run_time_limit,
 )
 from linksim.link import DirectionConfig, LinkConfig, run_virtual
+from serialsocket._interrupt import run_interruptibly
 
 from . import _demo
 from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, load_world, read_key
@@ -365,7 +364,7 @@ def control_main(args: argparse.Namespace) -> int:
         if args.virtual:
             report = run_virtual(run)  # trio's virtual clock, its scheduler seeded
         else:
-            report = trio.run(run)
+            report = run_interruptibly(run)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130  # as a shell reports SIGINT

@@ -9,9 +9,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from functools import partial
-
-import trio
 
 import serialsocket
 from linksim._errors import ConfigError
@@ -20,11 +17,10 @@ from linksim.demo import (
     DemoOptions,
     DemoReport,
     print_report,
-    run_control,
     run_demo,
     run_time_limit,
 )
-from linksim.link import DirectionConfig, LinkConfig, endpoint_config_for, endpoint_overrides
+from linksim.link import endpoint_config_for, endpoint_overrides
 
 from ._args import (
     BAUD,
@@ -35,11 +31,10 @@ from ._args import (
     TCP_PORT,
     WINDOW,
     load_world,
-    read_key,
 )
 from ._link import add_link_arguments, config_from_args
 
-__all__ = ["add_control_arguments", "add_demo_arguments", "control_main", "demo_main"]
+__all__ = ["add_control_arguments", "add_demo_arguments", "demo_main"]
 
 
 def _common(ap: argparse.ArgumentParser) -> None:
@@ -151,48 +146,3 @@ def add_control_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--host", default="127.0.0.1", help="arm server address (tcp)")
     ap.add_argument("--tcp-port", type=TCP_PORT, default=7010, help="arm server port (tcp)")
     ap.add_argument("--key-file", help="file holding the pre-shared key as hex")
-
-
-def control_main(args: argparse.Namespace) -> int:
-    """``linksim control``: run the rock task against a running ``linksim arm-server``."""
-    try:
-        if args.transport == "serial" and not args.port:
-            raise ValueError("--port PATH is needed for the serial transport")
-        key = read_key(args.key_file) if args.key_file else None
-        link = LinkConfig.symmetric(
-            DirectionConfig(
-                rate=args.baud if args.transport == "serial" else None, delay=args.delay
-            )
-        )
-        options = DemoOptions(
-            link=link,
-            preset=None,
-            transport=args.transport,
-            window=args.window,
-            max_len=args.max_len,
-            world=_world(args),
-            key=key,
-            progress=not args.quiet,
-            live=False if args.plain else None,
-            timeout=args.timeout if args.timeout is not None else run_time_limit(link),
-        )
-    except (ConfigError, ValueError, OSError) as exc:
-        print(f"linksim control: {exc}", file=sys.stderr)
-        return 2
-    try:
-        report = trio.run(
-            partial(
-                run_control,
-                options,
-                key=key,
-                host=args.host,
-                tcp_port=args.tcp_port,
-                port=args.port,
-                baud=args.baud,
-                dial=args.dial,
-            )
-        )
-    except KeyboardInterrupt:
-        print("linksim control: interrupted", file=sys.stderr)
-        return 1
-    return _finish(report, args, "linksim control")

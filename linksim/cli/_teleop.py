@@ -14,8 +14,6 @@ import json
 import sys
 from typing import Any
 
-import trio
-
 from linksim._plotting import PlotUnavailable
 from linksim.link import PRESETS, run_virtual
 from linksim.teleop import (
@@ -25,6 +23,7 @@ from linksim.teleop import (
     run_teleop,
     run_teleop_loopback,
 )
+from serialsocket._interrupt import run_interruptibly
 from tcpstream.teleop import TeleopMode
 
 from ._args import SECONDS, SECONDS_OR_ZERO, SEED, read_key
@@ -156,7 +155,7 @@ def teleop_main(args: argparse.Namespace) -> int:
         print(f"linksim teleop: {exc}", file=sys.stderr)
         return 2
     if args.transport == "loopback":
-        result: dict[str, Any] = trio.run(
+        result: dict[str, Any] = run_interruptibly(
             lambda: run_teleop_loopback(args.duration or 60.0, key=key)
         )
         ok = bool(result["every_sample_applied"])
@@ -191,7 +190,11 @@ def teleop_main(args: argparse.Namespace) -> int:
     if args.compare_plot:
         return _compare(options, args.compare_plot, args.json)
     try:
-        report = run_virtual(run_teleop, options) if args.virtual else trio.run(run_teleop, options)
+        report = (
+            run_virtual(run_teleop, options)
+            if args.virtual
+            else run_interruptibly(run_teleop, options)
+        )
     except OSError as exc:  # the ptys or the line could not be opened
         print(f"linksim teleop: {exc}", file=sys.stderr)
         return 1
@@ -212,7 +215,7 @@ def _compare(options: TeleopOptions, path: str, as_json: bool) -> int:
         ("force-reflection", False),
     ):
         opts = dataclasses.replace(options, scheme=scheme, force_stop=stop)
-        report = trio.run(run_teleop, opts) if opts.real else run_virtual(run_teleop, opts)
+        report = run_interruptibly(run_teleop, opts) if opts.real else run_virtual(run_teleop, opts)
         runs.append((report, stop))
     title = (
         f"{options.task}, {options.mode.name.lower()} mode, {options.preset} over "

@@ -36,6 +36,7 @@ from linksim.control import (
     run_command_line,
 )
 from linksim.link import endpoint_config_for, rtt_hint_for, run_virtual
+from serialsocket._interrupt import run_interruptibly
 from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream, connect_tcp
 
 from ._report import (
@@ -413,7 +414,7 @@ def run_console(options: ConsoleOptions) -> ConsoleResult:
     """Run the console to the end (never raises for a failed run)."""
     if options.lines is not None:
         if not options.demo.virtual:
-            return trio.run(_command_line, options)
+            return run_interruptibly(_command_line, options)
         if options.rate > 0:
             clock = trio.testing.MockClock(rate=options.rate)
         else:
@@ -425,4 +426,4 @@ def run_console(options: ConsoleOptions) -> ConsoleResult:
         else:
             clock = trio.testing.MockClock(autojump_threshold=0)
         return run_virtual(_virtual, options, clock=clock)
-    return trio.run(_real, options)
+    return run_interruptibly(_real, options)

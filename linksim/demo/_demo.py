@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import time
 
-import trio
-
 from linksim.link import run_virtual
+from serialsocket._interrupt import run_interruptibly
 
 from ._real import run_real
 from ._report import DemoOptions, DemoReport
@@ -35,6 +34,6 @@ def run_demo(options: DemoOptions) -> DemoReport:
     if options.virtual:
         return run_virtual(run_virtual_demo, options)
     started = time.monotonic()
-    report = trio.run(run_real, options)
+    report = run_interruptibly(run_real, options)
     report.seconds = time.monotonic() - started
     return report

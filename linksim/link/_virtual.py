@@ -20,6 +20,8 @@ from typing import TypeVar
 import trio
 import trio.testing
 
+from serialsocket._interrupt import run_interruptibly
+
 __all__ = ["run_virtual"]
 
 T = TypeVar("T")
@@ -51,4 +53,4 @@ def run_virtual(
         rng.seed(SCHEDULER_SEED)
     if clock is None:
         clock = trio.testing.MockClock(autojump_threshold=0)
-    return trio.run(fn, *args, clock=clock)
+    return run_interruptibly(fn, *args, clock=clock)
