@@ -16,7 +16,7 @@ from dataclasses import asdict
 
 from ._checks import BlockCheck
 from ._errors import LocalProtocolError
-from ._interrupt import run_interruptibly
+from .interrupt import run_interruptibly
 from ._port import open_port
 from .argtypes import (
     BAUD,

@@ -43,7 +43,7 @@ from ._driver import LinkBroken
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._hayes import DialError, ModemConnection, answer, dial
-from ._interrupt import run_interruptibly
+from .interrupt import run_interruptibly
 from ._port import open_port
 from ._socket import SerialSocket, accept, connect
 from ._trace import TracingStream

@@ -21,7 +21,7 @@ from linksim.link import (
     endpoint_overrides,
     server_config_for,
 )
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 from serialsocket.capture import CaptureFile
 from tcpstream import Server
 

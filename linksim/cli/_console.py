@@ -37,7 +37,7 @@ from linksim.demo import (
     run_time_limit,
 )
 from linksim.link import DirectionConfig, LinkConfig, run_virtual
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 
 from . import _demo
 from ._args import BAUD, SECONDS, SERIAL_PORT, TCP_PORT, FloatRange, load_world, read_key

@@ -23,7 +23,7 @@ from linksim.teleop import (
     run_teleop,
     run_teleop_loopback,
 )
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 from tcpstream.teleop import TeleopMode
 
 from ._args import SECONDS, SECONDS_OR_ZERO, SEED, read_key

@@ -36,7 +36,7 @@ from linksim.control import (
     run_command_line,
 )
 from linksim.link import endpoint_config_for, rtt_hint_for, run_virtual
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 from tcpstream import ArmClient, Server, ServerConfig, SessionError, connect_stream, connect_tcp
 
 from ._report import (

@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 
 from linksim.link import run_virtual
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 
 from ._real import run_real
 from ._report import DemoOptions, DemoReport

@@ -20,7 +20,7 @@ from typing import TypeVar
 import trio
 import trio.testing
 
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 
 __all__ = ["run_virtual"]
 

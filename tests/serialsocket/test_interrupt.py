@@ -21,7 +21,7 @@ import pytest
 import trio
 import trio.testing
 
-from serialsocket._interrupt import run_interruptibly
+from serialsocket.interrupt import run_interruptibly
 
 LIMIT = 60.0
 

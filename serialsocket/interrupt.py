@@ -1,5 +1,9 @@
 """Ctrl-C as a cancellation: a command-line run ends through its own cleanup.
 
+Public for the command-line programs built on this stack (serialsocket's,
+linksim's, a user's own controller): ``run_interruptibly(main)`` in place of
+``trio.run(main)``.
+
 trio's default turns SIGINT into a KeyboardInterrupt raised wherever the
 main thread happens to be.  Raised between entering a nursery and guarding
 it (an ``__aenter__`` half done, as when Ctrl-C lands while a client is still
