@@ -16,7 +16,6 @@ from dataclasses import asdict
 
 from ._checks import BlockCheck
 from ._errors import LocalProtocolError
-from .interrupt import run_interruptibly
 from ._port import open_port
 from .argtypes import (
     BAUD,
@@ -28,6 +27,7 @@ from .argtypes import (
     SERIAL_PORT,
     IntRange,
 )
+from .interrupt import run_interruptibly
 from .kermit import (
     REMOTE_COMMANDS,
     KermitConfig,

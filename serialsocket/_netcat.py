@@ -43,11 +43,11 @@ from ._driver import LinkBroken
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._hayes import DialError, ModemConnection, answer, dial
-from .interrupt import run_interruptibly
 from ._port import open_port
 from ._socket import SerialSocket, accept, connect
 from ._trace import TracingStream
 from ._wire import DEFAULT_MAX_PACKET_LENGTH
+from .interrupt import run_interruptibly
 
 __all__ = ["add_arguments", "netcat_main"]
 

@@ -21,8 +21,8 @@ from linksim.link import (
     endpoint_overrides,
     server_config_for,
 )
-from serialsocket.interrupt import run_interruptibly
 from serialsocket.capture import CaptureFile
+from serialsocket.interrupt import run_interruptibly
 from tcpstream import Server
 
 from ._args import (
