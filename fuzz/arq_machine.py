@@ -14,6 +14,9 @@ Hypothesis then interleaves application calls, time, and impairments:
 
 * the application sends (random bytes, long runs, control and prefix
   characters, as much as ``send_buffer_free`` allows), reads, and half-closes;
+  it also sends and reads expedited messages (PROTOCOL.md section 11) and
+  offers and reads latest values (section 12), when the ends agreed on those
+  lanes;
 * time advances to the next timer or arrival, or a named line delivers its
   head chunk (timers due before that arrival fire first, in order: time never
   runs backwards and no timer is skipped);
@@ -60,13 +63,20 @@ After every step (``@invariant``):
 * an endpoint that reports EndOfStream has delivered everything its peer sent,
   and the peer did call ``send_eof``;
 * once a side has every packet acknowledged, its peer has delivered every byte;
+* expedited messages are read whole, once each and in the order sent;
+* latest values are read in the order offered (each carries a per-side
+  counter), each at most once, possibly with gaps, and each is one the peer
+  offered; once a side's lane is settled (nothing waiting, the newest value
+  sent acknowledged), its peer has delivered the last value it offered;
 * no endpoint is FAILED or DEAD, and none reported ConnectionAborted or LinkDead;
 * no timer stays due after it was handled (a busy loop in a real event loop);
 * Connected, EndOfStream and ConnectionClosed are each reported at most once.
 
-After healing (``teardown``): both sides read exactly what the other sent,
-each reported Connected, EndOfStream and ConnectionClosed exactly once, and
-both reached State.CLOSED within a bounded number of events and simulated time.
+After healing (``teardown``): both sides read exactly what the other sent
+(stream and expedited lane), the last latest value each read is the last one
+its peer offered (a graceful close waits for its acknowledgement), each
+reported Connected, EndOfStream and ConnectionClosed exactly once, and both
+reached State.CLOSED within a bounded number of events and simulated time.
 
 No endpoint call may raise: any exception fails the example.  Time is explicit
 (``self.now``); nothing reads a clock or sleeps.
@@ -150,7 +160,7 @@ that retransmits into a void forever hits this long before the time limit."""
 
 SMALLEST_LENGTH = ENDPOINT_LENGTH.lo
 """The smallest ``max_packet_length`` drawn: the smallest ``EndpointConfig``
-accepts, because the 37-character init packet must fit (shorter lengths are
+accepts, because the 38-character init packet must fit (shorter lengths are
 refused with LocalProtocolError; ``test_smallest_packet_length_can_connect``)."""
 
 TIMER_SPIN_LIMIT = 64
@@ -164,6 +174,14 @@ DIRECTIONS = ("ab", "ba")
 _SPECIAL = b"\x00\x01\x0d\x0a\x1b\x7f\x80\x81\x8d\xff#&~ "
 """Bytes the prefix encoding treats specially: controls, MARK, CR, DEL, 8th-bit
 controls, and the default QCTL/QBIN/REPT prefix characters."""
+
+LATEST_COUNTER = 8
+"""Bytes of the big-endian counter that starts each latest value (1, 2, ... per
+side): it makes every value unique and tells its place in the series."""
+
+LATEST_TAIL_MAX = 52
+"""Random bytes after the counter: values of 8..60 bytes, which fit one packet
+at most drawn lengths (a value that does not is refused with ValueError)."""
 
 
 def split_packets(data: bytes) -> list[bytes]:
@@ -260,6 +278,9 @@ def endpoint_configs(
         dense=draw(st.sampled_from([True, True, True, False])),
         # The expedited lane (PROTOCOL.md section 11): used when both offer it.
         expedited=draw(st.sampled_from([True, True, True, False])),
+        # The latest-value lane (section 12): used when both offer it and the
+        # expedited lane (it rides on the same XLANES offer).
+        latest=draw(st.sampled_from([True, True, True, False])),
         check=draw(_CHECKS),
         xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
@@ -291,6 +312,11 @@ class ARQMachine(RuleBasedStateMachine):
         self.xsent: dict[str, list[bytes]] = {s: [] for s in SIDES}
         """Expedited messages each side's send_expedited took, in order."""
         self.xreceived: dict[str, list[bytes]] = {s: [] for s in SIDES}
+        self.lsent: dict[str, list[bytes]] = {s: [] for s in SIDES}
+        """Latest values each side's send_latest took, in order: value ``n``
+        (from 1) starts with ``n`` as an 8-byte big-endian counter."""
+        self.lreceived: dict[str, list[bytes]] = {s: [] for s in SIDES}
+        """Latest values each side's read_latest returned, in order."""
         self.events: dict[str, list[Event]] = {s: [] for s in SIDES}
         self.healed = False
         self._eof_called = dict.fromkeys(SIDES, False)
@@ -376,7 +402,17 @@ class ARQMachine(RuleBasedStateMachine):
             self.received[side] += self.ep[side].read(None, self.now)
             while (message := self.ep[side].read_expedited()) is not None:
                 self.xreceived[side].append(message)
+            self._read_latest(side)
         self._flush()
+
+    def _read_latest(self, side: str) -> None:
+        readable = self.ep[side].latest_readable
+        value = self.ep[side].read_latest()
+        assert (value is not None) == readable, (side, readable, value)
+        if value is not None:
+            self.lreceived[side].append(value)
+        assert not self.ep[side].latest_readable, side
+        assert self.ep[side].read_latest() is None, side
 
     def _can_send(self, side: str) -> bool:
         ep = self.ep[side]
@@ -493,6 +529,54 @@ class ARQMachine(RuleBasedStateMachine):
     def app_read_expedited(self, side: str) -> None:
         while (message := self.ep[side].read_expedited()) is not None:
             self.xreceived[side].append(message)
+        self._flush()
+
+    def _latest_senders(self) -> list[str]:
+        return [
+            s
+            for s in SIDES
+            if self.ep[s].state is State.ESTABLISHED
+            and self.ep[s].latest
+            and not self.ep[s].closing
+        ]
+
+    @precondition(lambda self: bool(self._latest_senders()))
+    @rule(
+        data=st.data(),
+        tails=st.lists(st.binary(max_size=LATEST_TAIL_MAX), min_size=1, max_size=3),
+    )
+    def app_send_latest(self, data: st.DataObject, tails: list[bytes]) -> None:
+        """Offer one to three latest values in a row (the later ones replace an
+        earlier one still waiting for the line).  Each is unique and ordered:
+        an 8-byte big-endian counter per side, then random bytes."""
+        side = data.draw(st.sampled_from(self._latest_senders()), label="side")
+        ep = self.ep[side]
+        for tail in tails:
+            value = (len(self.lsent[side]) + 1).to_bytes(LATEST_COUNTER, "big") + tail
+            waiting = ep.latest_waiting
+            coalesced = ep.statistics().latest_coalesced
+            refused: Exception | None = None
+            try:
+                ep.send_latest(value, self.now)
+            except (LocalProtocolError, ValueError) as exc:
+                refused = exc
+            if refused is not None:
+                # Only a value too long for one packet at short lengths is refused.
+                why = str(refused)
+                assert isinstance(refused, ValueError), why
+                assert "fit one packet" in why, why
+                continue
+            self.lsent[side].append(value)
+            stats = ep.statistics()
+            assert ep.latest_waiting, side
+            assert stats.latest_offered == len(self.lsent[side]), (stats, len(self.lsent[side]))
+            # An offer replacing a value still waiting for the line is counted.
+            assert stats.latest_coalesced == coalesced + waiting, (stats, coalesced, waiting)
+        self._flush()
+
+    @rule(side=_side)
+    def app_read_latest(self, side: str) -> None:
+        self._read_latest(side)
         self._flush()
 
     @precondition(lambda self: bool(self._closers()))
@@ -641,6 +725,36 @@ class ARQMachine(RuleBasedStateMachine):
             )
 
     @invariant()
+    def latest_values_arrive_in_order_at_most_once(self) -> None:
+        for side in SIDES:
+            offered = self.lsent[self._peer(side)]
+            last = 0
+            for value in self.lreceived[side]:
+                n = int.from_bytes(value[:LATEST_COUNTER], "big")
+                assert n > last, f"{side} read latest value {n} after {last}"
+                assert n <= len(offered), f"{side} read latest value {n} of {len(offered)}"
+                assert offered[n - 1] == value, (
+                    f"{side} read a latest value its peer never offered: number {n}, {value!r}"
+                )
+                last = n
+
+    @invariant()
+    def settled_latest_value_was_delivered(self) -> None:
+        for side in SIDES:
+            offered = self.lsent[side]
+            if offered and self.ep[side].latest_settled:
+                # The newest value sent is acknowledged and nothing newer waits: the
+                # peer delivered the last value offered -- unread in its inbox (then
+                # nothing newer can replace it before it is read: the invariant
+                # above checks whatever is read) or the last one it read.
+                peer = self._peer(side)
+                got = self.lreceived[peer]
+                assert self.ep[peer].latest_readable or (got and got[-1] == offered[-1]), (
+                    f"{side}'s latest lane is settled but {peer} last read "
+                    f"{got[-1] if got else None!r}, not {offered[-1]!r}"
+                )
+
+    @invariant()
     def end_of_stream_means_everything_arrived(self) -> None:
         for side in SIDES:
             if any(isinstance(e, EndOfStream) for e in self.events[side]):
@@ -675,6 +789,17 @@ class ARQMachine(RuleBasedStateMachine):
             stats = self.ep[side].statistics()
             assert stats.bytes_delivered == len(self.received[side]) + self.ep[side].readable
             assert stats.bytes_acknowledged <= len(self.sent[side])
+            ep = self.ep[side]
+            # Every value offered was replaced while waiting, handed to the line,
+            # or still waits; every value delivered was read, replaced unread, or
+            # waits to be read.
+            assert stats.latest_offered == len(self.lsent[side])
+            assert stats.latest_offered == (
+                stats.latest_coalesced + stats.latest_sent + ep.latest_waiting
+            ), stats
+            assert stats.latest_received == (
+                len(self.lreceived[side]) + stats.latest_superseded + ep.latest_readable
+            ), stats
             if self.ep[side].all_acknowledged and self.ep[side].state is not State.IDLE:
                 # Acknowledgements never lie: once every packet is acknowledged, the
                 # peer holds all of them, hence has delivered every byte in order.
@@ -719,6 +844,17 @@ class ARQMachine(RuleBasedStateMachine):
             peer = self._peer(side)
             assert self.received[side] == self.sent[peer]
             assert self.xreceived[side] == self.xsent[peer]
+            # Every latest value was offered while ESTABLISHED and not closing, and
+            # a graceful close waits for the newest one's acknowledgement.
+            assert self.ep[peer].latest_settled, peer
+            offered = self.lsent[peer]
+            if offered:
+                got = self.lreceived[side]
+                assert got, f"{side} read none of {len(offered)} latest values"
+                assert got[-1] == offered[-1], (
+                    f"{side} last read latest value {got[-1]!r}, "
+                    f"not {offered[-1]!r} ({len(got)} of {len(offered)} read)"
+                )
             assert self.ep[side].at_eof
             assert self.ep[side].all_acknowledged
             kinds = [type(e) for e in self.events[side]]
@@ -743,6 +879,8 @@ class ARQMachine(RuleBasedStateMachine):
         """Every invariant, for use outside hypothesis's own invariant checks."""
         self.delivered_is_prefix_of_sent()
         self.expedited_messages_arrive_once_and_in_order()
+        self.latest_values_arrive_in_order_at_most_once()
+        self.settled_latest_value_was_delivered()
         self.end_of_stream_means_everything_arrived()
         self.connection_stays_alive()
         self.accounting_is_consistent()
@@ -754,6 +892,7 @@ class ARQMachine(RuleBasedStateMachine):
             parts.append(
                 f"{side}: {ep.state.value} timers={self._timers(side)} "
                 f"sent={len(self.sent[side])} read={len(self.received[side])} "
+                f"latest offered={len(self.lsent[side])} read={len(self.lreceived[side])} "
                 f"events={[type(e).__name__ for e in self.events[side]]} {ep.statistics()}"
             )
         for d in DIRECTIONS:

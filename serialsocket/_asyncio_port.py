@@ -30,6 +30,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from ._encoding import Encoding
 from ._pyserial import (
+    PTY_MASTER_CLOSE_GRACE,
     THREAD_READ_TIMEOUT,
     PortStatistics,
     check_line_settings,
@@ -90,11 +91,14 @@ class AsyncioSerialPort:
         serial: the pyserial object (its settings), or None for a raw pty fd.
     """
 
-    def __init__(self, transport: _Transport, name: str, serial_obj: Any = None) -> None:
+    def __init__(
+        self, transport: _Transport, name: str, serial_obj: Any = None, *, close_grace: float = 0.0
+    ) -> None:
         self._t = transport
         self.name = name
         self.serial = serial_obj
         self._closed = False
+        self._close_grace = close_grace
         self._reading = self._writing = False
         self._bytes_in = self._bytes_out = self._reads = self._writes = self._errors = 0
 
@@ -171,7 +175,11 @@ class AsyncioSerialPort:
         if self._closed:
             return
         self._closed = True
-        await self._t.aclose()
+        try:
+            if self._close_grace > 0:
+                await asyncio.sleep(self._close_grace)  # see PTY_MASTER_CLOSE_GRACE
+        finally:
+            await self._t.aclose()
 
 
 def port_statistics(port: object) -> PortStatistics | None:
@@ -413,7 +421,9 @@ def open_pty_pair() -> tuple[AsyncioSerialPort, AsyncioSerialPort]:
         tty.setraw(slave)
         tty.setraw(master)
         name = os.ttyname(slave)
-        a = AsyncioSerialPort(_FdTransport(master), f"{name} (master)")
+        a = AsyncioSerialPort(
+            _FdTransport(master), f"{name} (master)", close_grace=PTY_MASTER_CLOSE_GRACE
+        )
         b = AsyncioSerialPort(_FdTransport(slave), name)
     finally:
         os.close(master)

@@ -16,7 +16,13 @@ from ._checks import BlockCheck
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
 from ._packet import data_capacity
-from ._params import DENSE_FEATURES, FEATURE_EXPEDITED, FEATURE_XON_XOFF, MAX_LONG_WINDOW
+from ._params import (
+    DENSE_FEATURES,
+    FEATURE_EXPEDITED,
+    FEATURE_XON_XOFF,
+    LANE_LATEST,
+    MAX_LONG_WINDOW,
+)
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
@@ -36,10 +42,13 @@ MAX_WINDOW = 31
 """Largest window: sequence numbers are mod 64 and selective repeat needs the
 window to be at most half the space (Kermit's 31; E-Kermit P_WSLOTS)."""
 
-MIN_ENDPOINT_PACKET_LENGTH = 37
-"""The init packet is 37 characters (30 data + header + CRC; 34 without the
-long-sequence offer, 33 with no XCAPAS at all): each side must receive it, so
-no endpoint may announce less (MIN_PACKET_LENGTH bounds the packet layer alone)."""
+MIN_ENDPOINT_PACKET_LENGTH = 38
+"""The init packet is at most 38 characters (31 data + header + CRC: XCAPAS,
+XWINDO and XLANES; 37 without the latest-value lane's XLANES, 34 without the
+long-sequence offer either, 33 with no XCAPAS at all): each side must receive
+it, so no endpoint may announce less (MIN_PACKET_LENGTH bounds the packet
+layer alone).  It was 37 until XLANES (PROTOCOL.md section 12): an older
+telelink configured for exactly 37 refuses a current endpoint's init."""
 
 DEFAULT_BUFFER_CAP = 16 * 1024 * 1024
 """Most bytes the receive buffer grows to with the bandwidth-delay product:
@@ -143,6 +152,13 @@ class EndpointConfig:
             EMERGENCY_STOP there).  On by default; a telelink peer that
             agrees makes the init one character longer (XCAPAS); False keeps
             the classic init unless something else is offered.
+        latest: offer the latest-value lane (XLANES bit 1 beside the
+            expedited lane's XCAPAS bit 16, PROTOCOL.md section 12): a series
+            of values, each superseding the last, where a lost value is never
+            repaired once a newer one exists (:meth:`Endpoint.send_latest`;
+            tcpstream's teleoperation samples and replies use it).  On by
+            default (with ``expedited``; one more init character); False
+            sends the init without XLANES.
         xon_xoff: the line uses software flow control: the escape code must
             escape XON/XOFF as well (declared in XCAPAS, bit 32).
         one_way_delay: a hint, where estimation starts: the link's one-way
@@ -224,6 +240,7 @@ class EndpointConfig:
     encoding: Encoding | None = None
     dense: bool = False
     expedited: bool = True
+    latest: bool = True
     xon_xoff: bool = False
     one_way_delay: float = 0.0
     line_rate: float | None = None
@@ -415,6 +432,11 @@ class EndpointConfig:
         if not self.dense:
             return lane or None
         return DENSE_FEATURES | lane | (FEATURE_XON_XOFF if self.xon_xoff else 0)
+
+    def init_lanes(self) -> int | None:
+        """The XLANES bits this side offers (PROTOCOL.md section 12), or None
+        for no XLANES field (it rides with the expedited lane's bit 16)."""
+        return LANE_LATEST if self.latest and self.expedited else None
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

@@ -62,6 +62,14 @@ from ._expedited import (
     ExpeditedReceiver,
     ExpeditedSender,
 )
+from ._latest import (
+    LATEST,
+    LATEST_ACK,
+    LATEST_LEAD,
+    LATEST_MAX_BYTES,
+    LatestReceiver,
+    LatestSender,
+)
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
 from ._params import (
@@ -205,6 +213,20 @@ class EndpointStatistics:
     """Expedited fragments sent and not yet acknowledged, plus messages waiting."""
     expedited_refused: int = 0
     """Expedited fragments not taken because the inbox was full (resent later)."""
+    latest: bool = False
+    """The latest-value lane was negotiated (PROTOCOL.md section 12)."""
+    latest_offered: int = 0
+    """Values given to :meth:`Endpoint.send_latest`."""
+    latest_coalesced: int = 0
+    """Values replaced by a newer one before they reached the line."""
+    latest_sent: int = 0
+    """Values handed to the line (each once; resends are ``latest_resent``)."""
+    latest_resent: int = 0
+    """Resends of the newest value after its timer ran out with nothing newer."""
+    latest_received: int = 0
+    """Values delivered from the peer (copies not counted)."""
+    latest_superseded: int = 0
+    """Received values replaced by a newer one before they were read."""
     idle_copies: int = 0
     """Extra copies of unacknowledged packets sent while the line would have
     idled (``EndpointConfig.idle_copies``); not counted as retransmissions."""
@@ -262,6 +284,8 @@ class Endpoint:
     _answer_with: InitParameters | None
     _xsend: ExpeditedSender
     _xrecv: ExpeditedReceiver
+    _lsend: LatestSender
+    _lrecv: LatestReceiver
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -275,6 +299,7 @@ class Endpoint:
             timeout_hint=cfg.initial_timeout(),
             long_window=self._long_offer(),
             features=cfg.init_features(),  # XCAPAS offers (PROTOCOL.md 10)
+            lanes=cfg.init_lanes(),  # XLANES (PROTOCOL.md 12)
         )
         self._parser = PacketParser(
             max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
@@ -491,6 +516,80 @@ class Endpoint:
         """Every expedited message sent so far has been acknowledged."""
         return self._xsend.idle
 
+    # -- public: the latest-value lane ------------------------------------------------
+
+    @property
+    def latest(self) -> bool:
+        """Both ends agreed on the latest-value lane (PROTOCOL.md section 12)."""
+        return self._negotiated is not None and self._negotiated.latest
+
+    def send_latest(self, value: bytes | bytearray | memoryview, now: float) -> None:
+        """Offer ``value`` as the newest of a series: it replaces a value not
+        yet handed to the line, and once sent, a newer value replaces it on
+        the line instead of its resend.
+
+        A value goes to the line when the pacer has room after the stream's
+        own packets (the stream keeps priority), in one packet of its own.
+        The peer's :meth:`read_latest` gets values in the order they were
+        sent, each at most once, possibly with gaps (the superseded ones);
+        the newest value offered is resent until acknowledged, so once the
+        offers stop the peer holds the last one.  A graceful close waits for
+        that acknowledgement.
+
+        Raises:
+            LocalProtocolError: the lane was not negotiated (:attr:`latest`
+                is False: a classic Kermit or an older telelink, or either
+                side has ``EndpointConfig.latest`` or ``expedited`` off), or
+                the connection is not established or is closing.
+            ValueError: ``value`` is empty, longer than
+                :data:`~serialsocket._latest.LATEST_MAX_BYTES`, or does not
+                fit one packet at the negotiated length once encoded.
+        """
+        if self._state is not State.ESTABLISHED or not self.latest or self.closing:
+            why = "closing" if self.closing else self._state.value
+            raise LocalProtocolError(
+                "no latest-value lane: the connection is "
+                f"{why}{'' if self.latest else ' without one negotiated'}; "
+                "send it on the stream instead"
+            )
+        data = bytes(value)
+        if not 0 < len(data) <= LATEST_MAX_BYTES:
+            raise ValueError(f"a latest value is 1..{LATEST_MAX_BYTES} bytes, not {len(data)}")
+        cut = self._encoding.encode_fields(data, self._capacity - 1, 2)
+        if len(cut) != 1 or cut[0][1] < len(data):
+            raise ValueError(
+                f"{len(data)} bytes do not fit one packet at the negotiated packet length "
+                f"({self._capacity} data characters); send less, or use the stream"
+            )
+        self._lsend.offer(cut[0][0])
+
+    def read_latest(self) -> bytes | None:
+        """The newest value from the peer not yet read, or None.  A value that
+        arrived while an older one was unread replaced it."""
+        return self._lrecv.read()
+
+    @property
+    def latest_readable(self) -> bool:
+        """:meth:`read_latest` would return a value now."""
+        return self._lrecv.value is not None
+
+    @property
+    def latest_waiting(self) -> bool:
+        """A value offered to :meth:`send_latest` has not yet been handed to the line."""
+        return self._lsend.pending is not None
+
+    @property
+    def latest_settled(self) -> bool:
+        """Nothing waits for the line and the newest value sent was acknowledged."""
+        return self._lsend.idle
+
+    @property
+    def latest_over(self) -> str | None:
+        """Why no further latest value can arrive (None while one can)."""
+        if self._state in TERMINAL:
+            return f"the connection ended ({self._state.value}); no more latest values"
+        return None
+
     # -- public: data -------------------------------------------------------------
 
     def read(self, max_bytes: int | None = None, now: float | None = None) -> bytes:
@@ -537,7 +636,13 @@ class Endpoint:
         lost): what "delivered" means for a close (RELIABILITY.md section 1).
         """
         s = self._sender
-        return not s.queue and s.bytes_in_flight == 0 and self._receiver.eof and self._xsend.idle
+        return (
+            not s.queue
+            and s.bytes_in_flight == 0
+            and self._receiver.eof
+            and self._xsend.idle
+            and self._lsend.idle
+        )
 
     @property
     def at_eof(self) -> bool:
@@ -553,7 +658,7 @@ class Endpoint:
     def all_acknowledged(self) -> bool:
         """Everything queued so far has been sent and acknowledged."""
         s = self._sender
-        return not s.queue and s.base == s.next and self._xsend.idle
+        return not s.queue and s.base == s.next and self._xsend.idle and self._lsend.idle
 
     # -- public: the I/O side ---------------------------------------------------------
 
@@ -588,6 +693,7 @@ class Endpoint:
         if self._state is State.ESTABLISHED and self._negotiated is not None:
             self._release_expedited(now, out)
             self._release_data(now, out)
+            self._release_latest(now, out)
         return b"".join(out)
 
     def get_timer(self) -> float | None:
@@ -601,7 +707,11 @@ class Endpoint:
                 times = [self._last_heard + self._dead_after, self._next_probe_time()]
                 if self._close_deadline < math.inf:
                     times.append(self._close_deadline)
-                for deadline in (self._sender.next_deadline(), self._xsend.next_deadline()):
+                for deadline in (
+                    self._sender.next_deadline(),
+                    self._xsend.next_deadline(),
+                    self._lsend.next_deadline(),
+                ):
                     if deadline is not None:
                         times.append(deadline)
                 return min(times)
@@ -702,6 +812,13 @@ class Endpoint:
             expedited_received=self._xrecv.messages_received,
             expedited_unacknowledged=len(self._xsend.outstanding) + len(self._xsend.waiting),
             expedited_refused=self._xrecv.refused,
+            latest=self.latest,
+            latest_offered=self._lsend.offered,
+            latest_coalesced=self._lsend.coalesced,
+            latest_sent=self._lsend.sent_values,
+            latest_resent=self._lsend.resent,
+            latest_received=self._lrecv.received,
+            latest_superseded=self._lrecv.superseded,
             idle_copies=c["idle_copies"],
             doubled_resends=c["doubled_resends"],
         )
@@ -759,6 +876,8 @@ class Endpoint:
         self._answer_with = None
         self._xsend = ExpeditedSender()
         self._xrecv = ExpeditedReceiver()
+        self._lsend = LatestSender()
+        self._lrecv = LatestReceiver()
 
     def _go(self, trigger: Trigger) -> None:
         old = self._state
@@ -976,6 +1095,12 @@ class Endpoint:
                 self._on_urgent(packet)
             else:
                 self._on_urgent_ack(packet, now)
+        elif ptype in (LATEST, LATEST_ACK) and self.latest and self._state in CONNECTED:
+            if ptype == LATEST:
+                self._rate.reverse(now)
+                self._on_latest(packet)
+            else:
+                self._on_latest_ack(packet, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
 
@@ -1213,6 +1338,34 @@ class Endpoint:
             self._counters["fast_retransmits"] += 1
         self._check_closed(now)
 
+    def _on_latest(self, packet: Packet) -> None:
+        """A latest value: ``tochar(number >> 6)`` then the encoded bytes."""
+        high = unchar(packet.data[0]) if packet.data else -1
+        if not 0 <= high < 64:
+            self._counters["ignored_packets"] += 1  # a broken peer's: its check was good
+            return
+        number = high << 6 | packet.seq
+        if self._lrecv.on_value(number, None):
+            value = self._encoding.decode_fields([packet.data[1:]])  # MalformedDataError: abort
+            if not self._receiver.discard:
+                self._lrecv.deliver(value)
+        else:
+            self._counters["duplicates_received"] += 1
+        self._control.append(
+            build_packet(
+                Packet(seq=packet.seq, type=LATEST_ACK, data=bytes((tochar(high),))),
+                self._send_check,
+            )
+        )
+
+    def _on_latest_ack(self, packet: Packet, now: float) -> None:
+        high = unchar(packet.data[0]) if packet.data else -1
+        if not 0 <= high < 64:
+            self._counters["ignored_packets"] += 1
+            return
+        self._lsend.on_ack(high << 6 | packet.seq)
+        self._check_closed(now)
+
     def _progress_mark(self) -> tuple[int, int]:
         """What a close's progress is measured by: our packets acknowledged
         (selectively too, EOF included) and the peer's packets received in order."""
@@ -1228,7 +1381,9 @@ class Endpoint:
             self._close_deadline = now + self._close_patience
 
     def _check_closed(self, now: float) -> None:
-        both_closed = self._sender.eof_acked and self._receiver.eof and self._xsend.idle
+        both_closed = (
+            self._sender.eof_acked and self._receiver.eof and self._xsend.idle and self._lsend.idle
+        )
         if both_closed and allowed(self._state, Trigger.BOTH_CLOSED):
             self._go(Trigger.BOTH_CLOSED)
             # The peer resends its EOF on its own, possibly backed-off, timer: stay
@@ -1289,9 +1444,12 @@ class Endpoint:
             or (s.has_new_data() and s.room(self._effective_window()) > 0)
             or self._copy_due() is not None
         )
-        if not wants:
-            return None
-        return self._pacer.wake()
+        wake = self._pacer.wake() if wants else None
+        if self._lsend.may_send_new or self._lsend.resend_due:
+            latest = self._pacer.idle_wake(LATEST_LEAD)
+            if latest is not None:
+                wake = latest if wake is None else min(wake, latest)
+        return wake
 
     def _copy_due(self) -> Outstanding | None:
         """The packet an idle line should carry another copy of, if any
@@ -1354,6 +1512,29 @@ class Endpoint:
             done_at = self._account(frag.wire, now)
             self._xsend.sent(frag, done_at, timeout, self._rtt.ceiling)
 
+    def _release_latest(self, now: float, out: list[bytes]) -> None:
+        """The newest value, when the pacer has room after the stream's packets
+        (at the last moment, so the freshest value goes); else its resend, if
+        its timer ran out with nothing newer to send."""
+        ls = self._lsend
+        if not self._pacer.idle_within(now, LATEST_LEAD):
+            return
+        if ls.may_send_new:
+            number, field = ls.take_new()
+            wire = build_packet(
+                Packet(
+                    seq=number % 64, type=LATEST, data=bytes((tochar(number >> 6 & 63),)) + field
+                ),
+                self._send_check,
+            )
+        elif ls.resend_due:
+            wire = ls.wire
+            self._counters["retransmissions"] += 1
+        else:
+            return
+        out.append(wire)
+        ls.sent(wire, self._account(wire, now), self._rtt.timeout(), self._rtt.ceiling)
+
     def _release_data(self, now: float, out: list[bytes]) -> None:
         s = self._sender
         timeout = self._rtt.timeout()
@@ -1407,6 +1588,7 @@ class Endpoint:
         """Fill an idle line with copies of unacknowledged packets, newest
         first.  A copy is a retransmission on the wire; its timer runs from
         the copy, and its ACK gives no round-trip sample (Karn)."""
+        self._release_latest(now, out)  # a fresh value before another copy
         while self._pacer.has_room(now) and (pkt := self._copy_due()) is not None:
             self._sender.take_copy(pkt, walk=not self._sender.has_new_data())
             self._counters["idle_copies"] += 1
@@ -1491,6 +1673,13 @@ class Endpoint:
             worst = max(f.transmissions for f in self._xsend.outstanding.values())
             if limit is not None and worst > limit:
                 self._finish_abort("Too many retries (expedited)", by_peer=False, send=True)
+                return
+        if self._lsend.expired(now) and self._lsend.pending is None:
+            # Nothing newer to send instead: the last value goes again.
+            self._counters["timeouts"] += 1
+            limit = self.config.max_retries
+            if limit is not None and self._lsend.transmissions > limit:
+                self._finish_abort("Too many retries (latest value)", by_peer=False, send=True)
                 return
         if now >= self._next_probe_time():
             self._last_probe = now

@@ -51,7 +51,7 @@ duplicate exactly as section 4.2 does for data."""
 EXPEDITED_MAX_BYTES = 1024
 """The longest message the lane takes.  It must also fit in
 :data:`EXPEDITED_WINDOW` fragments at the negotiated packet length: 216 bytes
-of anything always do (the shortest legal packet, 37 characters, carries 8
+of anything always do (the shortest legal packet, 38 characters, carries 8
 bytes of the worst case, three characters a byte)."""
 
 EXPEDITED_QUEUE = 8

@@ -104,6 +104,20 @@ class Pacer:
         # room (a float-rounding mismatch here would spin forever).
         return now >= self.free_at - self.horizon() - TIME_EPSILON
 
+    def idle_within(self, now: float, lead: float) -> bool:
+        """The UART's queue drains within ``lead`` seconds of ``now`` (always
+        True unpaced): when a latest value may go, so it waits behind next
+        to nothing and leaves as fresh as it can."""
+        if not self.paced or self.free_at is None:
+            return True
+        return now >= self.free_at - min(lead, self.horizon()) - TIME_EPSILON
+
+    def idle_wake(self, lead: float) -> float | None:
+        """When :meth:`idle_within` will next hold, or None if it always does."""
+        if not self.paced or self.free_at is None:
+            return None
+        return self.free_at - min(lead, self.horizon())
+
     def wake(self) -> float | None:
         """When the line will next have room, or None if it is never held back."""
         if not self.paced or self.free_at is None:

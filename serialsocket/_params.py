@@ -33,6 +33,8 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
                  lane, 32 = escape XON/XOFF too
  24   XWINDO     three chars, tochar of 6 bits each, most significant first:
                  the window offered with long sequence numbers (with XCAPAS 1)
+ 25   XLANES     tochar(further lanes offered): 1 = the latest-value lane
+                 (with XCAPAS 16, after XWINDO when that is present)
 ====  =========  ==========================================================
 
 MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
@@ -63,6 +65,7 @@ __all__ = [
     "FEATURE_EXPEDITED",
     "FEATURE_RADIX91",
     "FEATURE_XON_XOFF",
+    "LANE_LATEST",
     "LONG_SEQ_MODULUS",
     "MAX_LONG_WINDOW",
     "PROTOCOL_VERSION",
@@ -104,6 +107,9 @@ FEATURE_EXPEDITED = 16
 """XCAPAS bit: I speak the expedited lane (PROTOCOL.md section 11); agreed when
 both set it."""
 FEATURE_XON_XOFF = 32
+LANE_LATEST = 1
+"""XLANES bit (the field after XCAPAS and XWINDO, sent with XCAPAS bit 16): I
+speak the latest-value lane (PROTOCOL.md section 12); agreed when both set it."""
 """XCAPAS bit: my line uses software flow control: the escape code must
 escape XON/XOFF (:data:`~serialsocket._dense.XON_XOFF`) too."""
 DENSE_FEATURES = FEATURE_ESCAPE | FEATURE_RADIX91
@@ -181,6 +187,9 @@ class InitParameters:
             None when the init carries no XCAPAS at all (a classic or older
             peer; then nothing of PROTOCOL.md section 10 is used).  Bits this
             version does not know are kept as received and never agreed.
+        lanes: the XLANES bits (:data:`LANE_LATEST`), or None when the init
+            carries no XLANES (it needs XCAPAS bit 16: an older telelink
+            sends none, and reads past what it does not know).
     """
 
     max_packet_length: int
@@ -194,6 +203,7 @@ class InitParameters:
     version: int | None = PROTOCOL_VERSION
     long_window: int | None = None
     features: int | None = None
+    lanes: int | None = None
 
     @classmethod
     def mine(
@@ -206,6 +216,7 @@ class InitParameters:
         timeout_hint: float,
         long_window: int | None = None,
         features: int | None = None,
+        lanes: int | None = None,
     ) -> InitParameters:
         """The parameters an endpoint with this configuration offers.
 
@@ -236,6 +247,7 @@ class InitParameters:
             timeout_hint=timeout_hint,
             long_window=long_window,
             features=features,
+            lanes=lanes if features is not None and features & FEATURE_EXPEDITED else None,
         )
 
     def answer(self, theirs: InitParameters, long_window: int | None) -> InitParameters:
@@ -246,9 +258,11 @@ class InitParameters:
         (``features`` not None), with the features both sides know --
         so the answer never claims an encoding the requester did not offer --
         plus CRC-32 when either side asks for it.  Long sequence numbers:
-        ``long_window`` when the requester offered them.
+        ``long_window`` when the requester offered them.  XLANES: the lanes
+        both speak, when both sent the field and the expedited lane is agreed.
         """
         features = None
+        lanes = None
         if theirs.features is not None and self.features is not None:
             # Encodings: what both decode.  CRC-32 and XON/XOFF: wishes and
             # declarations, mine and (CRC-32) the requester's echoed.
@@ -259,9 +273,12 @@ class InitParameters:
                 | ((self.features | theirs.features) & FEATURE_CRC32 if speaks else 0)
                 | (self.features & FEATURE_XON_XOFF)
             )
+            if features & FEATURE_EXPEDITED and None not in (self.lanes, theirs.lanes):
+                lanes = (self.lanes or 0) & (theirs.lanes or 0)
         return dataclasses.replace(
             self,
             features=features,
+            lanes=lanes,
             long_window=long_window if theirs.long_window is not None else None,
         )
 
@@ -302,6 +319,8 @@ class InitParameters:
             fields.append(tochar(xcaps))
             if self.long_window is not None:
                 fields += encode18(self.long_window)
+            if xcaps & FEATURE_EXPEDITED and self.lanes is not None:
+                fields.append(tochar(self.lanes))
         return bytes(fields)
 
     @classmethod
@@ -360,6 +379,7 @@ class InitParameters:
         timeout_hint = None
         long_window = None
         features = None
+        lanes = None
         if j < len(data):
             sysid_len = unchar(data[j])
             sysid = data[j + 1 : j + 1 + sysid_len]
@@ -379,6 +399,11 @@ class InitParameters:
                         long_window = decode18(data[k + 5 : k + 8])
                         if long_window is None or not 1 <= long_window <= MAX_LONG_WINDOW:
                             raise bad("XWINDO")
+                    at_lanes = k + (8 if xcaps & _XCAP_LONG_SEQ else 5)
+                    if xcaps & FEATURE_EXPEDITED and at_lanes < len(data):
+                        lanes = unchar(data[at_lanes])
+                        if not 0 <= lanes <= 94:
+                            raise bad("XLANES")
         return cls(
             max_packet_length=max(max_len, MIN_PACKET_LENGTH),
             window=window,
@@ -391,6 +416,7 @@ class InitParameters:
             version=version,
             long_window=long_window,
             features=features,
+            lanes=lanes,
         )
 
 
@@ -411,6 +437,7 @@ class Negotiated:
         long_seq: both offered long sequence numbers: they are mod
             :data:`LONG_SEQ_MODULUS` on the wire (PROTOCOL.md section 9).
         expedited: both offered the expedited lane (PROTOCOL.md section 11).
+        latest: both offered the latest-value lane (PROTOCOL.md section 12).
     """
 
     send_max_length: int
@@ -421,6 +448,7 @@ class Negotiated:
     peer: InitParameters
     long_seq: bool = False
     expedited: bool = False
+    latest: bool = False
 
     @property
     def modulus(self) -> int:
@@ -498,4 +526,7 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
         peer=theirs,
         long_seq=long_seq,
         expedited=bool(common & FEATURE_EXPEDITED),
+        latest=bool(
+            common & FEATURE_EXPEDITED and (mine.lanes or 0) & (theirs.lanes or 0) & LANE_LATEST
+        ),
     )

@@ -40,14 +40,15 @@ from typing import Any, Protocol
 import trio
 
 from ._encoding import Encoding
-from ._pyserial import THREAD_READ_TIMEOUT as _THREAD_READ_TIMEOUT
 from ._pyserial import (
+    PTY_MASTER_CLOSE_GRACE,
     PortStatistics,
     check_line_settings,
     open_serial,
     port_encoding,
     read_blocks_for_one_byte,
 )
+from ._pyserial import THREAD_READ_TIMEOUT as _THREAD_READ_TIMEOUT
 
 __all__ = ["PortStatistics", "SerialPort", "open_port", "open_pty_pair", "port_statistics"]
 
@@ -83,11 +84,14 @@ class SerialPort(trio.abc.Stream):
         serial: the pyserial object (its settings), or None for a raw pty fd.
     """
 
-    def __init__(self, transport: _Transport, name: str, serial_obj: Any = None) -> None:
+    def __init__(
+        self, transport: _Transport, name: str, serial_obj: Any = None, *, close_grace: float = 0.0
+    ) -> None:
         self._t = transport
         self.name = name
         self.serial = serial_obj
         self._closed = False
+        self._close_grace = close_grace
         # trio's contract: one sender and one receiver at a time (the thread
         # transport would otherwise interleave two writers' chunks).
         self._sending = self._receiving = False
@@ -194,7 +198,11 @@ class SerialPort(trio.abc.Stream):
             await trio.lowlevel.checkpoint()
             return
         self._closed = True
-        await self._t.aclose()
+        try:
+            if self._close_grace > 0:
+                await trio.sleep(self._close_grace)  # see PTY_MASTER_CLOSE_GRACE
+        finally:
+            await self._t.aclose()
 
 
 def port_statistics(port: object) -> PortStatistics | None:
@@ -429,7 +437,7 @@ def open_pty_pair() -> tuple[SerialPort, SerialPort]:
         # ignored by Linux, but other kernels honour some of them.
         tty.setraw(master)
         name = os.ttyname(slave)
-        a = SerialPort(_FdTransport(master), f"{name} (master)")
+        a = SerialPort(_FdTransport(master), f"{name} (master)", close_grace=PTY_MASTER_CLOSE_GRACE)
         b = SerialPort(_FdTransport(slave), name)
     finally:
         # Each transport holds its own duplicate.

@@ -24,6 +24,7 @@ from ._config import line_encoding
 from ._encoding import EIGHT_BIT_CLEAN, Encoding
 
 __all__ = [
+    "PTY_MASTER_CLOSE_GRACE",
     "THREAD_READ_TIMEOUT",
     "THREAD_WRITE_TIMEOUT",
     "PortStatistics",
@@ -32,6 +33,14 @@ __all__ = [
     "port_encoding",
     "read_blocks_for_one_byte",
 ]
+
+PTY_MASTER_CLOSE_GRACE = 0.2
+"""Seconds a pty master waits before it closes.  Linux hangs the slave up when
+its master closes and discards what the slave has not read yet: a socket
+that closes right after its last write (the ACK of the peer's EOF) could
+take it with it, and the peer, never told its data arrived, reported an
+unclean close (an example did, on a loaded machine).  A serial port's close
+drains its output instead; only the pty master waits."""
 
 THREAD_READ_TIMEOUT = 0.05
 """Seconds one blocking read in the reader thread waits before it looks at

@@ -274,6 +274,62 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 raise trio.BrokenResourceError(over)
             await self._d.changed()
 
+    # -- the latest-value lane (PROTOCOL.md section 12) ---------------------------
+
+    @property
+    def latest(self) -> bool:
+        """Both ends agreed on the latest-value lane: :meth:`send_latest` and
+        :meth:`receive_latest` work (False with a classic or older peer)."""
+        return self._d.ep.latest
+
+    def send_latest(self, value: bytes | bytearray | memoryview) -> None:
+        """Offer ``value`` as the newest of a series; never waits.
+
+        It replaces a value not yet on the line, goes on the line when the
+        stream's own packets leave room, and a newer value replaces it on
+        the line instead of its resend: a lost value never holds up a newer
+        one.  The peer's :meth:`receive_latest` gets values in order, each at
+        most once, some skipped; the newest is resent until acknowledged.
+
+        Raises:
+            trio.ClosedResourceError: this socket was closed.
+            trio.BrokenResourceError: the connection failed, is closing, or has
+                no lane (check :attr:`latest`).
+            ValueError: ``value`` is empty or does not fit one packet.
+        """
+        self._check_open()
+        self._raise_if_broken()
+        try:
+            self._d.ep.send_latest(value, self._d.now())
+        except LocalProtocolError as exc:  # no lane, or the connection ended
+            raise trio.BrokenResourceError(str(exc)) from exc
+        self._d.notify()
+
+    @property
+    def latest_waiting(self) -> bool:
+        """A value given to :meth:`send_latest` is not yet on the line."""
+        return self._d.ep.latest_waiting
+
+    async def receive_latest(self) -> bytes:
+        """The newest value from the peer not yet received; waits (cancellably)
+        for one.  Values that arrived meanwhile and were overtaken are skipped.
+
+        Raises:
+            trio.ClosedResourceError: this socket was closed.
+            trio.BrokenResourceError: the connection ended (a value that had
+                arrived is returned first).
+        """
+        await trio.lowlevel.checkpoint()
+        while True:
+            self._check_open()
+            value = self._d.ep.read_latest()
+            if value is not None:
+                return value
+            self._raise_if_broken()
+            if (over := self._d.ep.latest_over) is not None:
+                raise trio.BrokenResourceError(over)
+            await self._d.changed()
+
     async def aclose(self) -> None:
         """Close gracefully: all our data acknowledged, both EOFs exchanged.
 

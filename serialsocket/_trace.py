@@ -23,6 +23,7 @@ from ._checks import BlockCheck
 from ._encoding import PRINTABLE, Encoding
 from ._errors import MalformedDataError, RemoteProtocolError
 from ._expedited import URGENT
+from ._latest import LATEST
 from ._params import DataCodec, InitParameters, negotiate
 from ._parser import PacketParser, PacketReceived
 from ._port import PortStatistics, port_statistics
@@ -79,11 +80,14 @@ class _Direction:
                     or (pkt.type == PacketType.ACK and len(pkt.data) >= _INIT_ANSWER)
                 ):
                     self._on_init(pkt.data)
-                if pkt.type in (PacketType.DATA, URGENT):
-                    # An expedited fragment (PROTOCOL.md 11): tochar(more), then data.
+                if pkt.type in (PacketType.DATA, URGENT, LATEST):
+                    # An expedited fragment (PROTOCOL.md 11): tochar(more), then data;
+                    # a latest value (12): tochar(number >> 6), then data.
                     skip = self.head if pkt.type == PacketType.DATA else 1
                     if pkt.type == URGENT and pkt.data:
                         head += f" expedited more={pkt.data[0] - 32}"
+                    if pkt.type == LATEST and pkt.data:
+                        head += f" latest value={(pkt.data[0] - 32) << 6 | pkt.seq}"
                     try:
                         payload = self.encoding.decode(pkt.data[skip:])
                     except MalformedDataError as exc:

@@ -286,6 +286,48 @@ class AsyncioSerialSocket:
                 raise ConnectionError(over)
             await self._d.changed()
 
+    # -- the latest-value lane (PROTOCOL.md section 12) ------------------------
+
+    @property
+    def latest(self) -> bool:
+        """Both ends agreed on the latest-value lane (False with a classic or older peer)."""
+        return self._d.ep.latest
+
+    def send_latest(self, value: bytes | bytearray | memoryview) -> None:
+        """Offer ``value`` as the newest of a series; never waits (see
+        ``SerialSocket.send_latest``).
+
+        Raises:
+            ConnectionError: the connection failed, is closing, or has no lane.
+            RuntimeError: the socket was closed.
+            ValueError: ``value`` is empty or does not fit one packet.
+        """
+        self._check_open()
+        self._raise_if_broken()
+        try:
+            self._d.ep.send_latest(value, self._d.now())
+        except LocalProtocolError as exc:  # no lane, or the connection ended
+            raise ConnectionError(str(exc)) from exc
+        self._d.notify()
+
+    async def receive_latest(self) -> bytes:
+        """The newest value from the peer not yet received; waits for one.
+
+        Raises:
+            ConnectionError: the connection ended (a value that had arrived is
+                returned first).
+            RuntimeError: the socket was closed.
+        """
+        while True:
+            self._check_open()
+            value = self._d.ep.read_latest()
+            if value is not None:
+                return value
+            self._raise_if_broken()
+            if (over := self._d.ep.latest_over) is not None:
+                raise ConnectionError(over)
+            await self._d.changed()
+
     def can_write_eof(self) -> bool:
         return True
 

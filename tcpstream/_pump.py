@@ -22,7 +22,7 @@ from ._packet import PACKET_SIZE
 from ._ratelimit import TokenBucket
 from ._state import SessionState, Side
 
-__all__ = ["ExpeditedStream", "Pump", "expedited_lane"]
+__all__ = ["ExpeditedStream", "LatestStream", "Pump", "expedited_lane", "latest_lane"]
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,35 @@ class ExpeditedStream(Protocol):
 def expedited_lane(stream: trio.abc.Stream) -> ExpeditedStream | None:
     """``stream`` as an :class:`ExpeditedStream` if it has a working lane, else None."""
     if isinstance(stream, ExpeditedStream) and stream.expedited:
+        return stream
+    return None
+
+
+@runtime_checkable
+class LatestStream(Protocol):
+    """A stream with a latest-value lane beside it (``serialsocket.SerialSocket``,
+    or the teleoperation channel of a mux over one): a series of values, each
+    superseding the last, where a lost value never holds up a newer one
+    (serialsocket/PROTOCOL.md section 12)."""
+
+    @property
+    def latest(self) -> bool:
+        """The lane is there on this connection (both ends agreed to it)."""
+        ...
+
+    @property
+    def latest_waiting(self) -> bool:
+        """A value given to :meth:`send_latest` has not yet reached the line."""
+        ...
+
+    def send_latest(self, value: bytes) -> None: ...
+
+    async def receive_latest(self) -> bytes: ...
+
+
+def latest_lane(stream: trio.abc.Stream) -> LatestStream | None:
+    """``stream`` as a :class:`LatestStream` if it has a working lane, else None."""
+    if isinstance(stream, LatestStream) and stream.latest:
         return stream
     return None
 

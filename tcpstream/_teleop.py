@@ -5,6 +5,11 @@ stream a sample (or a reply) only when :meth:`OperatorChannel.poll` says the
 line can take it; until then newer samples replace the waiting one.  While a
 sample is held back the writer looks again every ``poll_interval`` (the
 transport's figures change without telling us).
+
+When the stream has a latest-value lane (:func:`~tcpstream._pump.latest_lane`:
+a serial socket between telelink ends, or the sample channel of a mux over
+one) samples and replies go there (PROTOCOL.md 14.8) and a third task reads
+it; a value still waiting for the line counts as backlog.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from collections.abc import AsyncIterator, Callable
 
 import trio
 
+from ._pump import LatestStream, latest_lane
 from ._teleop_connection import ArmChannel, OperatorChannel
 from ._teleop_packet import Reply, Sample
 from ._teleop_state import (
@@ -67,6 +73,7 @@ class _Pump(abc.ABC):
         self._stream = stream
         self._backlog = backlog
         self._poll_interval = poll_interval
+        self._lane: LatestStream | None = latest_lane(stream)
         self._wake = trio.Event()
         self.closed = trio.Event()
         self.writer_done = trio.Event()
@@ -102,6 +109,48 @@ class _Pump(abc.ABC):
             self.closed.set()
             self.wake()
 
+    def _to_lane(self, ch: OperatorChannel | ArmChannel) -> bool:
+        """Hand the channel's lane message, if any, to the lane.  True when the
+        writer must look again at once: the message went, or the lane refused
+        it and it now waits in the channel's stream output."""
+        message = ch.lane_to_send()
+        if message is None or self._lane is None:
+            return False
+        # A value the transport still holds for the line is replaced by this
+        # fresher one: the line carries the newest, and the count says so.
+        replacing = self._lane.latest_waiting
+        try:
+            self._lane.send_latest(message)
+        except ValueError as exc:
+            # Longer than one packet at the negotiated length: the stream takes
+            # it, and every later one (PROTOCOL.md 14.8).
+            log.info("teleop: the latest-value lane refused a packet (%s); using the stream", exc)
+            self._lane = None
+            ch.lane_refused(message)
+            return True  # it waits in the stream output: send it now, not at a later wake
+        if replacing:
+            ch.lane_replaced()
+        return True
+
+    async def _lane_reader(self) -> None:
+        lane = self._lane
+        assert lane is not None
+        ch = self._channel()
+        try:
+            while ch.state is not ChannelState.CLOSED:
+                message = await lane.receive_latest()
+                self._events(ch.receive_lane(message, trio.current_time()))
+                self.wake()
+        except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+            log.debug("teleop lane reader ended: %r", exc)
+
+    def start(self, nursery: trio.Nursery) -> None:
+        """Start the reader (and the lane's) in ``nursery``; the writer is the caller's."""
+        nursery.start_soon(self._reader)
+        if self._lane is not None:
+            self._channel().use_lane()
+            nursery.start_soon(self._lane_reader)
+
     async def _writer(self) -> None:
         ch = self._channel()
         try:
@@ -112,6 +161,9 @@ class _Pump(abc.ABC):
                     backlog = self._backlog() if self._backlog is not None else None
                     if ch.poll(trio.current_time(), backlog):
                         data = ch.data_to_send()
+                if self._to_lane(ch) and not data:
+                    await trio.lowlevel.checkpoint()
+                    continue
                 if data:
                     await self._stream.send_all(data)
                     continue
@@ -212,7 +264,7 @@ async def open_teleop(
     nursery_cm = trio.open_nursery()
     nursery = await nursery_cm.__aenter__()
     try:
-        nursery.start_soon(op._reader)
+        op.start(nursery)
         nursery.start_soon(op._writer)
         ch.connect()
         op.wake()
@@ -314,7 +366,7 @@ class TeleopArm:
         )
         pump = _ArmPump(stream, ch, backlog, self._poll_interval, self)
         async with trio.open_nursery() as nursery:
-            nursery.start_soon(pump._reader)
+            pump.start(nursery)
             nursery.start_soon(self._handshake_deadline, ch, pump)
             # The writer returns once the channel is over and its REFUSE or BYE is out.
             await pump._writer()

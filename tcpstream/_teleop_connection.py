@@ -19,6 +19,14 @@ first measurement).  A STOP bypasses both, and is repeated (:data:`STOP_REPEAT`)
 until a REPLY says STOPPED: after a STOP the operator sends nothing else, so
 without a copy behind it a lost STOP waits for the transport's retransmission
 timer instead of being NAKed when the next packet shows the gap.
+
+The transport's latest-value lane (:meth:`_End.use_lane`, PROTOCOL.md 14.8):
+when the stream has one (a serial socket between telelink ends), SAMPLE and
+REPLY packets go there instead of into the stream -- each behind the first
+four bytes of the operator's HELLO nonce, which name the channel -- so a
+lost sample never holds a newer one at the receiver; everything else stays on
+the stream.  :meth:`_End.lane_to_send` hands out the packet for the lane and
+:meth:`_End.receive_lane` takes one from it.
 """
 
 from __future__ import annotations
@@ -72,6 +80,10 @@ __all__ = ["ArmChannel", "OperatorChannel"]
 TO_ARM = b"\x11"
 """Direction byte bound into operator -> arm tags (not the command session's 0x01)."""
 TO_OPERATOR = b"\x12"
+LANE_PREFIX = 4
+"""Bytes of the operator's HELLO nonce ahead of each packet on the latest-value
+lane: a value of an earlier channel on the same line (a resend still in flight
+when a new channel opened) is told apart and dropped."""
 GARBAGE_LIMIT = 8
 """Rejected packets in a row that end the channel: as the command session (section 10)."""
 MAX_PACKET = max(size_of(k) for k in TeleopKind)
@@ -108,12 +120,15 @@ class _End(abc.ABC):
         self._tx_counter = 0
         self._rx_counter = 0
         self._bad_in_row = 0
+        self._lane = False
+        self._lane_out: bytes | None = None
         self._stats: dict[str, int] = dict.fromkeys(
             (
                 "packets_in packets_out bytes_in bytes_out bad_packets tag_failures replays "
                 "resyncs samples_offered samples_sent samples_coalesced samples_received "
                 "samples_superseded replies_sent replies_coalesced replies_received stops_sent "
-                "stops_received stops_repeated held_by_backlog held_by_window samples_after_stop"
+                "stops_received stops_repeated held_by_backlog held_by_window samples_after_stop "
+                "lane_packets_in lane_packets_out lane_stale lane_replaced"
             ).split(),
             0,
         )
@@ -140,6 +155,87 @@ class _End(abc.ABC):
         out = bytes(self._out)
         self._out.clear()
         return out
+
+    # -- the transport's latest-value lane --------------------------------------------
+
+    def use_lane(self) -> None:
+        """The stream has a latest-value lane: send SAMPLE (REPLY) packets there."""
+        self._lane = True
+
+    @property
+    def lane(self) -> bool:
+        return self._lane
+
+    @abc.abstractmethod
+    def _lane_prefix(self) -> bytes | None:
+        """The channel's name on the lane (None before the HELLO)."""
+
+    def _emit_value(self, raw: bytes) -> None:
+        """A SAMPLE or REPLY: on the lane when there is one, else on the stream."""
+        prefix = self._lane_prefix()
+        if not self._lane or prefix is None:
+            self._emit(raw)
+            return
+        self._lane_out = prefix + raw  # the poll rule sends one only when the last has left
+        self._stats["packets_out"] += 1
+        self._stats["lane_packets_out"] += 1
+        self._stats["bytes_out"] += len(raw)
+
+    def lane_refused(self, message: bytes) -> None:
+        """The transport would not take ``message`` (from :meth:`lane_to_send`)
+        on its lane: send it, and every later one, on the stream."""
+        self._lane = False
+        self._stats["lane_packets_out"] -= 1
+        self._out += message[LANE_PREFIX:]
+
+    def lane_replaced(self) -> None:
+        """The lane message last handed out replaced one the transport had not
+        yet put on the line: that one was never sent after all."""
+        self._stats["lane_replaced"] += 1
+        self._stats[self._lane_sent] -= 1
+        self._stats[self._lane_coalesced] += 1
+
+    def lane_to_send(self) -> bytes | None:
+        """The message for the transport's latest-value lane, or None."""
+        out, self._lane_out = self._lane_out, None
+        return out
+
+    def receive_lane(self, message: bytes, now: float) -> list[TeleopEvent]:
+        """One message from the transport's latest-value lane: a whole SAMPLE
+        (at the arm) or REPLY (at the operator) behind this channel's prefix.
+
+        Taken only while the channel is OPEN.  A message of another channel or
+        one overtaken by a packet already taken (its counter is not above the
+        last: the stream and the lane share one counter) is dropped and
+        counted (``lane_stale``); a malformed one is a bad packet.
+        """
+        self._stats["bytes_in"] += len(message)
+        prefix = self._lane_prefix()
+        if self._state is not ChannelState.OPEN or prefix is None:
+            self._stats["lane_stale"] += 1
+            return []
+        if message[:LANE_PREFIX] != prefix:
+            self._stats["lane_stale"] += 1
+            return []
+        raw = message[LANE_PREFIX:]
+        try:
+            kind, counter, size = decode_header(raw)
+        except TeleopPacketError:
+            return self._bad("lane header")
+        if size != len(raw) or kind is not self._lane_kind:
+            return self._bad("lane packet")
+        self._stats["packets_in"] += 1
+        self._stats["lane_packets_in"] += 1
+        if counter <= self._rx_counter:
+            # Overtaken, not replayed: a packet with a higher counter came first
+            # (a STOP on the stream after this sample); nothing to punish.
+            self._stats["lane_stale"] += 1
+            return []
+        return self._packet(kind, counter, raw, now)
+
+    _lane_kind: TeleopKind
+    _lane_sent: str
+    _lane_coalesced: str
 
     def close(self, reason: RefuseCode = RefuseCode.NORMAL) -> list[TeleopEvent]:
         """Send BYE and close (idempotent)."""
@@ -262,6 +358,9 @@ class OperatorChannel(_End):
 
     _tx_dir = TO_ARM
     _rx_dir = TO_OPERATOR
+    _lane_kind = TeleopKind.REPLY
+    _lane_sent = "samples_sent"
+    _lane_coalesced = "samples_coalesced"
 
     def __init__(self, identity: str, key: bytes | None, nonce: bytes) -> None:
         super().__init__(key, ChannelState.IDLE)
@@ -287,6 +386,9 @@ class OperatorChannel(_End):
         self._rates: deque[float] = deque(maxlen=_RATE_SAMPLES)
         self._min_rtt: float | None = None
         self.last_reply: Reply | None = None
+
+    def _lane_prefix(self) -> bytes | None:
+        return self._nonce[:LANE_PREFIX]
 
     def connect(self) -> None:
         """Queue the HELLO."""
@@ -377,7 +479,7 @@ class OperatorChannel(_End):
         sample, self._pending = self._pending, None
         self._tx_counter += 1
         raw = encode_sample(sample, self._tx_counter, self._key, TO_ARM)
-        self._emit(raw)
+        self._emit_value(raw)
         self._stats["samples_sent"] += 1
         self._bytes_sent_samples += len(raw)
         self._sent.append((sample.sample, self._bytes_sent_samples, now))
@@ -471,6 +573,9 @@ class ArmChannel(_End):
 
     _tx_dir = TO_OPERATOR
     _rx_dir = TO_ARM
+    _lane_kind = TeleopKind.SAMPLE
+    _lane_sent = "replies_sent"
+    _lane_coalesced = "replies_coalesced"
 
     def __init__(
         self, key: bytes | None, nonce: bytes, *, rate_deadman: float, control_rate: float
@@ -493,6 +598,9 @@ class ArmChannel(_End):
     @property
     def identity(self) -> str:
         return self._identity.rstrip(b"\0").decode("utf-8", errors="replace")
+
+    def _lane_prefix(self) -> bytes | None:
+        return self._client_nonce[:LANE_PREFIX] if self._client_nonce else None
 
     def grant(self) -> None:
         self._go(ChannelState.OPEN)
@@ -537,7 +645,7 @@ class ArmChannel(_End):
             return False
         reply, self._reply = self._reply, None
         self._tx_counter += 1
-        self._emit(encode_reply(reply, self._tx_counter, self._key, TO_OPERATOR))
+        self._emit_value(encode_reply(reply, self._tx_counter, self._key, TO_OPERATOR))
         self._stats["replies_sent"] += 1
         return True
 

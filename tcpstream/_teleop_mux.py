@@ -25,8 +25,13 @@ TCP connection's.  The end of the underlying stream ends both.
 has one (a serial socket between telelink ends), the command channel offers
 it too -- each message goes on the stream's lane behind one byte naming the
 channel -- so the command session's EMERGENCY_STOP overtakes even the frame
-being written and whatever the transport holds.  The sample channel has no
-lane.
+being written and whatever the transport holds.
+
+**The latest-value lane** (PROTOCOL.md 14.8): when the underlying stream
+has one, the sample channel offers it -- each value behind the channel's
+byte -- so a sample (a reply) travels beside the frames and a lost one never
+holds a newer one.  The command channel has none: commands are not values
+that supersede each other.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from collections.abc import AsyncIterator
 
 import trio
 
-from ._pump import expedited_lane
+from ._pump import expedited_lane, latest_lane
 
 __all__ = ["COMMANDS", "MAX_FRAME", "TELEOP", "MuxChannel", "StreamMux", "open_mux"]
 
@@ -70,6 +75,7 @@ class MuxChannel(trio.abc.Stream):
         self._receiving = False
         self._changed = trio.Event()
         self._lane_in: list[bytes] = []
+        self._latest_in: bytes | None = None
 
     def _notify(self) -> None:
         self._changed.set()
@@ -181,6 +187,41 @@ class MuxChannel(trio.abc.Stream):
                 raise trio.BrokenResourceError("the peer closed this channel")
             await self._changed.wait()
 
+    @property
+    def latest(self) -> bool:
+        """This channel has a latest-value lane: the sample channel, over a
+        stream that has one."""
+        return self.number == TELEOP and self._mux._latest is not None
+
+    @property
+    def latest_waiting(self) -> bool:
+        """A value given to :meth:`send_latest` has not yet reached the line."""
+        lane = self._mux._latest
+        return lane is not None and lane.latest_waiting
+
+    def send_latest(self, value: bytes | bytearray | memoryview) -> None:
+        """Offer ``value`` on the stream's latest-value lane (never waits)."""
+        lane = self._mux._latest
+        if lane is None or self.number != TELEOP:
+            raise trio.BrokenResourceError("this channel has no latest-value lane")
+        self._check_send()
+        lane.send_latest(bytes((self.number,)) + bytes(value))
+
+    async def receive_latest(self) -> bytes:
+        """The newest lane value for this channel not yet received; waits for one."""
+        await trio.lowlevel.checkpoint()
+        while True:
+            if self._closed:
+                raise trio.ClosedResourceError("this channel was closed")
+            if self._latest_in is not None:
+                value, self._latest_in = self._latest_in, None
+                return value
+            if self._broken is not None:
+                raise trio.BrokenResourceError("the line failed") from self._broken
+            if self._eof:
+                raise trio.BrokenResourceError("the peer closed this channel")
+            await self._changed.wait()
+
     async def aclose(self) -> None:
         if not self._closed:
             self._closed = True  # what is queued still goes, then the close frame
@@ -195,6 +236,7 @@ class StreamMux:
     def __init__(self, stream: trio.abc.Stream) -> None:
         self._stream = stream
         self._lane = expedited_lane(stream)
+        self._latest = latest_lane(stream)
         self.commands = MuxChannel(self, COMMANDS)
         self.teleop = MuxChannel(self, TELEOP)
         self._channels = (self.commands, self.teleop)
@@ -306,12 +348,30 @@ class StreamMux:
             # graceful end must stay an EOF, not turn into a failure here).
             return
 
+    async def _latest_reader(self) -> None:
+        """Route the stream's latest values to the sample channel (the only one
+        with that lane), newest over unread; anything else is counted and dropped."""
+        lane = self._latest
+        assert lane is not None
+        try:
+            while True:
+                value = await lane.receive_latest()
+                if value[:1] != bytes((TELEOP,)):
+                    self.bad_frames += 1
+                    continue
+                self.teleop._latest_in = value[1:]
+                self.teleop._notify()
+        except (trio.BrokenResourceError, trio.ClosedResourceError):
+            return  # the stream's reader reports how the connection ended
+
     async def run(self, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED) -> None:
         async with trio.open_nursery() as nursery:
             nursery.start_soon(self._reader)
             nursery.start_soon(self._writer)
             if self._lane is not None:
                 nursery.start_soon(self._lane_reader)
+            if self._latest is not None:
+                nursery.start_soon(self._latest_reader)
             task_status.started()
 
 

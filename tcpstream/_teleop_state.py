@@ -168,6 +168,16 @@ class ChannelStatistics:
     samples_after_stop: int
     """Operator: samples offered after its STOP (never sent); arm: samples that
     arrived after a STOP (ignored)."""
+    lane_packets_in: int
+    """SAMPLEs (arm) or REPLYs (operator) taken from the transport's latest-value lane."""
+    lane_packets_out: int
+    """SAMPLEs or REPLYs handed to the lane (counted in ``packets_out`` too)."""
+    lane_stale: int
+    """Lane messages dropped: of another channel, before the grant, or overtaken
+    by a packet with a higher counter."""
+    lane_replaced: int
+    """Lane messages that replaced one the transport had not yet put on the line
+    (that one is then counted coalesced, not sent)."""
     in_flight_bytes: int
     window_bytes: float
     delivery_rate: float | None

@@ -81,7 +81,7 @@ SERIAL_CASES = [
         ["connect", "--max-len", "100000", "/dev/null"],
         b"",
         2,
-        "argument --max-len: must be an integer in 37..9031",
+        "argument --max-len: must be an integer in 38..9031",
     ),
     (["connect", "bogus://x"], b"", 2, "argument PORT: unknown URL scheme 'bogus'"),
     (["connect", "/nonexistent/port"], b"", 1, "/nonexistent/port"),

@@ -138,6 +138,9 @@ class TeleopReport:
     seconds: float
     error: str | None = None
     force_trace: list[tuple[float, float]] = field(default_factory=list)
+    samples_on_lane: int = 0
+    """Samples sent on the transport's latest-value lane (serial socket between
+    telelink ends, tcpstream/PROTOCOL.md 14.8) rather than in the stream."""
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
@@ -484,4 +487,5 @@ def _report(
         seconds=trio.current_time() - start,
         error=error,
         force_trace=st.force_trace,
+        samples_on_lane=op_stats.lane_packets_out if op_stats is not None else 0,
     )

@@ -675,6 +675,31 @@ def test_the_expedited_lane_between_asyncio_sockets() -> None:
     run(main)
 
 
+def test_the_latest_value_lane_between_asyncio_sockets() -> None:
+    """send_latest / receive_latest: the newest value arrives, in order, never twice."""
+
+    async def main() -> None:
+        line = MemoryLine()
+        a, b = await pair(line.a, line.b)
+        assert a.latest
+        assert b.latest
+        for n in range(1, 21):
+            a.send_latest(n.to_bytes(4, "big"))
+            await asyncio.sleep(0.001)
+        got: list[int] = []
+        while not got or got[-1] != 20:
+            got.append(int.from_bytes(await b.receive_latest(), "big"))
+        assert got == sorted(set(got))
+        with pytest.raises(ValueError, match="1024"):
+            a.send_latest(bytes(2000))
+        await a.aclose()
+        await b.aclose()
+        with pytest.raises(RuntimeError):
+            a.send_latest(b"after close")
+
+    run(main)
+
+
 def test_the_asyncio_client_sends_its_emergency_stop_on_the_lane() -> None:
     """The asyncio arm client finds the lane under open_connection's writer and
     sends EMERGENCY_STOP there; the trio arm takes it from there."""

@@ -130,7 +130,7 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
     a = Endpoint(EndpointConfig(dense=True, long_window=None))
     a.connect(0.0)
     field = _init_field(a, 0.0)
-    assert field == b'~  @-#&5~&?!:0___@"TL@!  R6'  # PROTOCOL.md 10.1's example
+    assert field == b'~  @-#&5~&?!:0___@"TL@!  R6!'  # PROTOCOL.md 10.1's example
     assert InitParameters.decode(field).features == (
         FEATURE_ESCAPE | FEATURE_RADIX91 | FEATURE_EXPEDITED
     )
@@ -146,7 +146,7 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
     b.connect(0.0)
     field = _init_field(b, 0.0)
     assert field[6:7] == b"Y"  # QBIN: an 8-bit line
-    assert field[26:] == bytes((32 + (2 | 4 | 8 | 16 | 32),))  # '^'
+    assert field[26:] == bytes((32 + (2 | 4 | 8 | 16 | 32), 32 + 1))  # "^" and XLANES "!"
 
 
 def test_a_request_without_xcapas_gets_exactly_the_classic_answer() -> None:

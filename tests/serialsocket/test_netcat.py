@@ -102,7 +102,7 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     trace = client.stderr.decode()
     # The connect request (--window 8: no long-sequence offer; XCAPAS offers the
     # dense encodings, PROTOCOL.md section 10) and the escape code on this 8N1 pty.
-    assert "tx I seq=0 len=34" in trace
+    assert "tx I seq=0 len=35" in trace
     assert "#Y5" in trace  # QBIN Y: --profile auto took the 8-bit profile from the port
     assert "rx Y seq=0" in trace  # its answer
     assert "tx D seq=1 len=128" in trace

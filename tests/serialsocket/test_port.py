@@ -283,3 +283,41 @@ def test_a_bad_url_option_is_a_value_error_not_a_key_error() -> None:
             await open_port("loop://?logging=nope")
 
     run(main)
+
+
+def test_a_pty_master_gives_its_slave_time_to_read_what_it_wrote_last() -> None:
+    """Closing a pty master discards what the slave has not read yet (Linux
+    hangs the slave up): a socket closing right after its last ACK lost it on
+    a loaded machine, and the peer reported an unclean close.  The master now
+    waits PTY_MASTER_CLOSE_GRACE first; a peer that reads within it gets the
+    bytes."""
+
+    async def main() -> bytes:
+        master, slave = open_pty_pair()
+        await master.send_all(b"the last ACK")
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(master.aclose)
+            await trio.sleep(0.02)  # a peer slow to read
+            got = await slave.receive_some()
+        await slave.aclose()
+        return got
+
+    assert trio.run(main) == b"the last ACK"
+
+
+def test_an_asyncio_pty_master_waits_too() -> None:
+    import asyncio
+
+    import serialsocket.asyncio as sa
+
+    async def main() -> bytes:
+        master, slave = sa.open_pty_pair()
+        await master.write(b"the last ACK")
+        closing = asyncio.ensure_future(master.aclose())
+        await asyncio.sleep(0.02)
+        got = await slave.read()
+        await closing
+        await slave.aclose()
+        return got
+
+    assert asyncio.run(main()) == b"the last ACK"
