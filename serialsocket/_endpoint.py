@@ -301,8 +301,13 @@ class Endpoint:
             features=cfg.init_features(),  # XCAPAS offers (PROTOCOL.md 10)
             lanes=cfg.init_lanes(),  # XLANES (PROTOCOL.md 12)
         )
+        # No type-1 E fallback: a telelink peer sends E with the check in
+        # force, and a D damaged into an E must not pass a 6-bit checksum.
         self._parser = PacketParser(
-            max_length=self._max_length, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
+            max_length=self._max_length,
+            check=BlockCheck.CRC16,
+            init_check=BlockCheck.CRC16,
+            error_fallback=False,
         )
         self._rate = RateEstimator(self._rate_hint())
         self._pacer = Pacer(

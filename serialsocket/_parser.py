@@ -183,6 +183,13 @@ class PacketParser:
         check: the block check expected on ordinary packets.
         init_check: the block check of S and I packets: type 1 as Kermit
             requires, or CRC-16 when FORCE-3 ("5") was agreed.
+        error_fallback: also accept an E packet with a type-1 check while a
+            stronger one is in force, as Kermit receivers do (a classic peer
+            may send its error that way).  The price: a one-bit error that
+            turns a ``D`` into an ``E`` passes the 6-bit checksum about once
+            in 64, and a bogus error aborts the transfer.  Peers that always
+            send E with the check in force (telelink endpoints, PROTOCOL.md
+            section 2) turn it off.
 
     ``check``, ``init_check`` and ``max_length`` may be changed between calls
     to :meth:`next_event`; the change applies to the next packet.
@@ -194,10 +201,12 @@ class PacketParser:
         max_length: int = DEFAULT_MAX_PACKET_LENGTH,
         check: BlockCheck = BlockCheck.CRC16,
         init_check: BlockCheck = BlockCheck.SUM6,
+        error_fallback: bool = True,
     ) -> None:
         self.max_length = max_length
         self.check = check
         self.init_check = init_check
+        self.error_fallback = error_fallback
         # The unparsed bytes are _buf[_pos:]: parsing moves _pos and slices
         # packets straight out of an immutable buffer; receive_data drops the
         # consumed prefix when it appends.
@@ -449,7 +458,7 @@ class PacketParser:
         else:
             first = self.check
         order = [first]
-        if ptype == PacketType.ERROR and first is not BlockCheck.SUM6:
+        if self.error_fallback and ptype == PacketType.ERROR and first is not BlockCheck.SUM6:
             # Peers may send E with a type-1 check whatever is in force (ckcfn2.c).
             order.append(BlockCheck.SUM6)
         return [c for c in order if int(c) <= field]

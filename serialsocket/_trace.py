@@ -49,7 +49,10 @@ class _Direction:
         self.other: _Direction | None = None
         # The largest packet anyone may negotiate: the trace must see them all.
         self.parser = PacketParser(
-            max_length=MAX_PACKET_LENGTH, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
+            max_length=MAX_PACKET_LENGTH,
+            check=BlockCheck.CRC16,
+            init_check=BlockCheck.CRC16,
+            error_fallback=False,  # as the endpoint parses (PROTOCOL.md section 2)
         )
 
     def _on_init(self, data: bytes) -> None:
