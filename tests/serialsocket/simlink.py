@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from serialsocket import Endpoint
+from serialsocket import Endpoint, EndpointConfig, State
 
 Filter = Callable[[str, bytes, float], list[bytes]]
 """(direction "ab"/"ba", one packet's wire bytes, time) -> packets to put on the line."""
@@ -130,3 +130,24 @@ class SimLink:
             self.step()
         self.now = end
         self.flush()
+
+
+MOON_HINTS = EndpointConfig(one_way_delay=1.3, line_rate=2400)
+"""Hints that match the default :func:`connected_pair` line: 2400 bit/s, 1.3 s one way."""
+
+
+def connected_pair(
+    cfg_a: EndpointConfig = MOON_HINTS,
+    cfg_b: EndpointConfig = MOON_HINTS,
+    *,
+    delay: float = 1.3,
+    rate: float | None = 2400,
+    filters: list[Filter] | None = None,
+) -> tuple[Endpoint, Endpoint, SimLink]:
+    """Two endpoints, ``a`` connected to listening ``b``, established on a :class:`SimLink`."""
+    a, b = Endpoint(cfg_a), Endpoint(cfg_b)
+    link = SimLink(a, b, delay=delay, rate=rate, filters=filters)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.state is State.ESTABLISHED and b.state is State.ESTABLISHED)
+    return a, b, link

@@ -15,25 +15,9 @@ from serialsocket._expedited import EXPEDITED_INBOX, EXPEDITED_QUEUE, EXPEDITED_
 from serialsocket._params import FEATURE_EXPEDITED, InitParameters
 from serialsocket.packets import BlockCheck, Packet, PacketParser, PacketReceived, build_packet
 
-from .simlink import SimLink
+from .simlink import MOON_HINTS, SimLink, connected_pair
 
-SLOW = EndpointConfig(one_way_delay=1.3, line_rate=2400)
-
-
-def _pair(
-    cfg_a: EndpointConfig = SLOW,
-    cfg_b: EndpointConfig = SLOW,
-    *,
-    delay: float = 1.3,
-    rate: float | None = 2400,
-    filters: list | None = None,  # type: ignore[type-arg]
-) -> tuple[Endpoint, Endpoint, SimLink]:
-    a, b = Endpoint(cfg_a), Endpoint(cfg_b)
-    link = SimLink(a, b, delay=delay, rate=rate, filters=filters)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.state is State.ESTABLISHED and b.state is State.ESTABLISHED)
-    return a, b, link
+SLOW = MOON_HINTS
 
 
 def _collect(ep: Endpoint, into: list[tuple[float, bytes]], link: SimLink) -> None:
@@ -42,7 +26,7 @@ def _collect(ep: Endpoint, into: list[tuple[float, bytes]], link: SimLink) -> No
 
 
 def test_both_defaults_agree_to_the_lane() -> None:
-    a, b, _ = _pair()
+    a, b, _ = connected_pair()
     assert a.expedited
     assert b.expedited
     assert a.statistics().expedited
@@ -51,7 +35,9 @@ def test_both_defaults_agree_to_the_lane() -> None:
 @pytest.mark.parametrize("off", ["connector", "listener"])
 def test_either_side_off_means_no_lane_and_sending_says_so(off: str) -> None:
     no = EndpointConfig(one_way_delay=1.3, line_rate=2400, expedited=False)
-    a, b, link = _pair(no if off == "connector" else SLOW, no if off == "listener" else SLOW)
+    a, b, link = connected_pair(
+        no if off == "connector" else SLOW, no if off == "listener" else SLOW
+    )
     assert not a.expedited
     assert not b.expedited
     with pytest.raises(LocalProtocolError, match="expedited"):
@@ -67,7 +53,7 @@ def test_the_offer_is_bit_16_and_off_keeps_the_classic_init() -> None:
 
 
 def test_a_message_overtakes_a_round_trip_of_queued_data() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     data = random.Random(1).randbytes(4000)
     sent = a.send(data, link.now)
     link.run_for(3.0)
@@ -116,7 +102,7 @@ def test_lost_fragments_and_lost_acks_deliver_each_message_once_in_order(
     kind: str, every: int
 ) -> None:
     rng = random.Random(every)
-    a, b, link = _pair(filters=[_dropper(kind, every)])
+    a, b, link = connected_pair(filters=[_dropper(kind, every)])
     messages = [rng.randbytes(rng.randrange(1, 300)) for _ in range(12)]
     for m in messages:
         a.send_expedited(m, link.now)
@@ -134,7 +120,7 @@ def test_lost_fragments_and_lost_acks_deliver_each_message_once_in_order(
 
 
 def test_a_lost_ack_brings_a_duplicate_that_is_acknowledged_not_delivered() -> None:
-    a, b, link = _pair(filters=[_dropper("V", 1000)])  # only the first V is lost
+    a, b, link = connected_pair(filters=[_dropper("V", 1000)])  # only the first V is lost
     a.send_expedited(b"once", link.now)
     got: list[tuple[float, bytes]] = []
     link.run_until(lambda: _collect(b, got, link) or a.expedited_settled, limit=600)
@@ -146,7 +132,7 @@ def test_a_lost_ack_brings_a_duplicate_that_is_acknowledged_not_delivered() -> N
 
 
 def test_a_long_message_is_cut_into_fragments_and_rejoined() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     message = random.Random(7).randbytes(1024)
     a.send_expedited(message, link.now)
     got: list[tuple[float, bytes]] = []
@@ -156,7 +142,7 @@ def test_a_long_message_is_cut_into_fragments_and_rejoined() -> None:
 
 
 def test_limits_are_typed_errors() -> None:
-    a, _b, link = _pair(
+    a, _b, link = connected_pair(
         EndpointConfig(one_way_delay=1.3, line_rate=2400, max_packet_length=40),
         EndpointConfig(one_way_delay=1.3, line_rate=2400, max_packet_length=40),
     )
@@ -170,7 +156,7 @@ def test_limits_are_typed_errors() -> None:
 
 
 def test_a_sender_that_is_never_acknowledged_is_bounded() -> None:
-    a, _, link = _pair(filters=[lambda d, p, t: [] if p[3:4] == b"V" else [p]])
+    a, _, link = connected_pair(filters=[lambda d, p, t: [] if p[3:4] == b"V" else [p]])
     big = bytes(range(256)) * 3
     accepted = 0
     with pytest.raises(LocalProtocolError, match="wait"):  # noqa: PT012 (the loop is the point)
@@ -181,7 +167,7 @@ def test_a_sender_that_is_never_acknowledged_is_bounded() -> None:
 
 
 def test_an_unread_inbox_holds_back_new_fragments_and_loses_nothing() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     messages = [bytes([i]) * 10 for i in range(EXPEDITED_INBOX + 4)]
     for m in messages[:EXPEDITED_QUEUE]:
         a.send_expedited(m, link.now)
@@ -202,7 +188,7 @@ def test_an_unread_inbox_holds_back_new_fragments_and_loses_nothing() -> None:
 
 
 def test_fragments_that_disagree_on_their_count_abort_the_connection() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     check = a.parameters.check if a.parameters else BlockCheck.CRC16
     # Fragment 1 says two more follow, fragment 2 says none do.
     for seq, more in ((1, 2), (2, 0)):
@@ -219,7 +205,7 @@ def test_fragments_that_disagree_on_their_count_abort_the_connection() -> None:
 
 
 def test_a_fragment_count_out_of_range_is_ignored() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     check = a.parameters.check if a.parameters else BlockCheck.CRC16
     before = b.statistics().ignored_packets
     b.receive_data(build_packet(Packet(seq=1, type="U", data=b"~x"), check), link.now)
@@ -230,14 +216,16 @@ def test_a_fragment_count_out_of_range_is_ignored() -> None:
 
 def test_without_the_lane_a_U_packet_is_just_an_unknown_type() -> None:
     no = EndpointConfig(one_way_delay=1.3, line_rate=2400, expedited=False)
-    _a, b, link = _pair(no, no)
+    _a, b, link = connected_pair(no, no)
     b.receive_data(build_packet(Packet(seq=1, type="U", data=b" x"), BlockCheck.CRC16), link.now)
     assert b.read_expedited() is None
     assert b.statistics().ignored_packets == 1
 
 
 def test_a_graceful_close_waits_for_the_lane() -> None:
-    a, b, link = _pair(filters=[_dropper("V", 1)])  # the first ACK is lost: a resend is needed
+    a, b, link = connected_pair(
+        filters=[_dropper("V", 1)]
+    )  # the first ACK is lost: a resend is needed
     a.send_expedited(b"last words", link.now)
     a.close(link.now)
     b.close(link.now)
@@ -247,7 +235,7 @@ def test_a_graceful_close_waits_for_the_lane() -> None:
 
 
 def test_the_lane_packets_parse_as_ordinary_kermit_packets() -> None:
-    a, _, link = _pair()
+    a, _, link = connected_pair()
     a.send_expedited(b"hi", link.now)
     parser = PacketParser(max_length=128, check=BlockCheck.CRC16)
     parser.receive_data(a.data_to_send(link.now))
@@ -301,7 +289,7 @@ def test_property_every_message_once_in_order_and_the_stream_intact(
             return [pkt, pkt]  # a duplicate as a resend would bring it
         return [pkt]
 
-    a, b, link = _pair(
+    a, b, link = connected_pair(
         EndpointConfig(one_way_delay=0.2, line_rate=9600),
         EndpointConfig(one_way_delay=0.2, line_rate=9600),
         delay=0.2,

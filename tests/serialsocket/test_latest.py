@@ -18,25 +18,9 @@ from serialsocket._latest import LATEST_MODULUS, LATEST_SPAN, LatestReceiver, La
 from serialsocket._params import LANE_LATEST, InitParameters, negotiate
 from serialsocket.packets import BlockCheck, Packet, build_packet
 
-from .simlink import SimLink
+from .simlink import MOON_HINTS, SimLink, connected_pair
 
-SLOW = EndpointConfig(one_way_delay=1.3, line_rate=2400)
-
-
-def _pair(
-    cfg_a: EndpointConfig = SLOW,
-    cfg_b: EndpointConfig = SLOW,
-    *,
-    delay: float = 1.3,
-    rate: float | None = 2400,
-    filters: list | None = None,  # type: ignore[type-arg]
-) -> tuple[Endpoint, Endpoint, SimLink]:
-    a, b = Endpoint(cfg_a), Endpoint(cfg_b)
-    link = SimLink(a, b, delay=delay, rate=rate, filters=filters)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.state is State.ESTABLISHED and b.state is State.ESTABLISHED)
-    return a, b, link
+SLOW = MOON_HINTS
 
 
 def _value(n: int) -> bytes:
@@ -90,7 +74,7 @@ def _stream_values(
 
 
 def test_both_defaults_agree_to_the_lane() -> None:
-    a, b, _ = _pair()
+    a, b, _ = connected_pair()
     assert a.latest
     assert b.latest
     assert a.statistics().latest
@@ -102,7 +86,9 @@ def test_both_defaults_agree_to_the_lane() -> None:
 )
 def test_either_side_off_means_no_lane_and_sending_says_so(off: str, setting: str) -> None:
     no = EndpointConfig(one_way_delay=1.3, line_rate=2400, **{setting: False})  # type: ignore[arg-type]
-    a, b, link = _pair(no if off == "connector" else SLOW, no if off == "listener" else SLOW)
+    a, b, link = connected_pair(
+        no if off == "connector" else SLOW, no if off == "listener" else SLOW
+    )
     assert not a.latest
     assert not b.latest
     with pytest.raises(LocalProtocolError, match="latest-value lane"):
@@ -156,7 +142,7 @@ def _packet_time(lengths: list[int]) -> float:
 
 def test_values_at_100_hz_arrive_in_order_newest_last_at_the_line_s_pace() -> None:
     lengths: list[int] = []
-    a, b, link = _pair(filters=[_longest_l(lengths)])
+    a, b, link = connected_pair(filters=[_longest_l(lengths)])
     ages = _stream_values(a, b, link, 600)  # 6 s of sampling
     numbers = [n for _, n in ages]
     assert numbers == sorted(set(numbers))  # in order, each once
@@ -174,7 +160,7 @@ def test_values_at_100_hz_arrive_in_order_newest_last_at_the_line_s_pace() -> No
 
 def test_a_lost_value_holds_up_nothing_and_is_never_resent() -> None:
     lengths: list[int] = []
-    a, b, link = _pair(filters=[_longest_l(lengths), _dropper("L", {3, 4})])
+    a, b, link = connected_pair(filters=[_longest_l(lengths), _dropper("L", {3, 4})])
     ages = _stream_values(a, b, link, 400)
     numbers = [n for _, n in ages]
     assert numbers == sorted(set(numbers))
@@ -184,7 +170,7 @@ def test_a_lost_value_holds_up_nothing_and_is_never_resent() -> None:
 
 
 def test_the_newest_value_is_resent_until_acknowledged() -> None:
-    a, b, link = _pair(filters=[_dropper("L", {1, 2})])
+    a, b, link = connected_pair(filters=[_dropper("L", {1, 2})])
     a.send_latest(_value(7), link.now)
     link.run_until(lambda: b.latest_readable and a.latest_settled, limit=600)
     assert b.read_latest() == _value(7)
@@ -192,7 +178,7 @@ def test_the_newest_value_is_resent_until_acknowledged() -> None:
 
 
 def test_a_lost_acknowledgement_brings_a_copy_that_is_not_delivered_again() -> None:
-    a, b, link = _pair(filters=[_dropper("M", {1})])
+    a, b, link = connected_pair(filters=[_dropper("M", {1})])
     a.send_latest(_value(1), link.now)
     link.run_until(lambda: a.latest_settled, limit=600)
     assert b.read_latest() == _value(1)
@@ -203,7 +189,7 @@ def test_a_lost_acknowledgement_brings_a_copy_that_is_not_delivered_again() -> N
 
 
 def test_an_unread_value_is_replaced_by_a_newer_one() -> None:
-    a, b, link = _pair()
+    a, b, link = connected_pair()
     for n in (1, 2, 3):
         a.send_latest(_value(n), link.now)
         link.run_until(lambda: a.latest_settled, limit=600)
@@ -220,7 +206,7 @@ def test_the_stream_goes_first_and_the_value_waits_for_next_to_nothing() -> None
             order.append((now, pkt[3:4]))
         return [pkt]
 
-    a, b, link = _pair(filters=[note])
+    a, b, link = connected_pair(filters=[note])
     order.clear()
     a.send(b"COMMAND" * 10, link.now)
     a.send_latest(_value(1), link.now)
@@ -230,7 +216,7 @@ def test_the_stream_goes_first_and_the_value_waits_for_next_to_nothing() -> None
 
 
 def test_a_graceful_close_waits_for_the_newest_value() -> None:
-    a, b, link = _pair(filters=[_dropper("M", {1})])
+    a, b, link = connected_pair(filters=[_dropper("M", {1})])
     a.send_latest(_value(9), link.now)
     a.close(link.now)
     b.close(link.now)
@@ -242,7 +228,7 @@ def test_a_graceful_close_waits_for_the_newest_value() -> None:
 
 
 def test_limits_are_typed_errors() -> None:
-    a, _, link = _pair()
+    a, _, link = connected_pair()
     with pytest.raises(ValueError, match=r"1\.\.1024"):
         a.send_latest(b"", link.now)
     with pytest.raises(ValueError, match="one packet"):
@@ -250,7 +236,7 @@ def test_limits_are_typed_errors() -> None:
 
 
 def test_bad_lane_packets_are_counted_and_dropped() -> None:
-    _a, b, link = _pair()
+    _a, b, link = connected_pair()
     ignored = b.statistics().ignored_packets
     b.receive_data(build_packet(Packet(seq=1, type="L", data=b""), BlockCheck.CRC16), link.now)
     b.receive_data(build_packet(Packet(seq=1, type="L", data=b"~x"), BlockCheck.CRC16), link.now)
@@ -258,7 +244,7 @@ def test_bad_lane_packets_are_counted_and_dropped() -> None:
     assert b.read_latest() is None
     assert b.statistics().ignored_packets == ignored + 3
     no = EndpointConfig(one_way_delay=1.3, line_rate=2400, latest=False)
-    _a, c, link = _pair(no, no)
+    _a, c, link = connected_pair(no, no)
     c.receive_data(build_packet(Packet(seq=1, type="L", data=b" x"), BlockCheck.CRC16), link.now)
     assert c.read_latest() is None
     assert c.statistics().ignored_packets == 1
@@ -312,7 +298,7 @@ def test_property_in_order_at_most_once_the_last_always_and_the_stream_intact(
         return [pkt]
 
     cfg = EndpointConfig(one_way_delay=0.2, line_rate=9600)
-    a, b, link = _pair(cfg, cfg, delay=0.2, rate=9600, filters=[lossy])
+    a, b, link = connected_pair(cfg, cfg, delay=0.2, rate=9600, filters=[lossy])
     data = rng.randbytes(2000)
     sent = a.send(data, link.now)
     got: list[int] = []
