@@ -13,6 +13,9 @@ and the text output.
   :func:`custom_grid` choose the points, :func:`run_grid` runs them (:func:`run_point`
   one), :func:`summarize` and :func:`plot_both` / :func:`plot_delay` / :func:`plot_ber`
   present the rows.
+* ``transfer``: :func:`run_transfer_table` runs issue 21's real-time table
+  (:data:`TRANSFER_ROWS`, a :class:`TransferRow` each; :func:`parse_transfer_row`
+  reads one from its number or its line), the netcat through ``linksim relay``.
 * The soak: :func:`run_soak` and its verdict :func:`check_soak`.
 """
 
@@ -28,6 +31,10 @@ from ._kermit import TransferSetup, bad_pairing, run_bench_kermit, run_kermit_ta
 from ._kermit import run_transfer as run_kermit_transfer
 from ._latency import TRANSPORTS as LATENCY_TRANSPORTS
 from ._latency import run as run_latency
+from ._line_table import ROWS as TRANSFER_ROWS
+from ._line_table import TransferRow
+from ._line_table import parse_row as parse_transfer_row
+from ._line_table import run_table as run_transfer_table
 from ._plot import plot_ber, plot_both, plot_delay, plot_delay_range
 from ._pty import DEFAULT_LENGTHS as PTY_LENGTHS
 from ._pty import PORTS as PTY_PORTS
@@ -47,8 +54,10 @@ __all__ = [
     "PTY_LENGTHS",
     "PTY_PORTS",
     "SWEEPS",
+    "TRANSFER_ROWS",
     "Point",
     "SoakReport",
+    "TransferRow",
     "TransferSetup",
     "auto_packet_length",
     "bad_pairing",
@@ -57,6 +66,7 @@ __all__ = [
     "custom_grid",
     "measure_relay",
     "missing_row_keys",
+    "parse_transfer_row",
     "plot_ber",
     "plot_both",
     "plot_delay",
@@ -72,6 +82,7 @@ __all__ = [
     "run_latency",
     "run_point",
     "run_soak",
+    "run_transfer_table",
     "standard_grid",
     "summarize",
 ]

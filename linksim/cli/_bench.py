@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,12 +26,15 @@ from linksim.bench import (
     PTY_LENGTHS,
     PTY_PORTS,
     SWEEPS,
+    TRANSFER_ROWS,
+    TransferRow,
     TransferSetup,
     bad_pairing,
     cpu_count,
     custom_grid,
     measure_relay,
     missing_row_keys,
+    parse_transfer_row,
     plot_ber,
     plot_both,
     plot_delay,
@@ -43,6 +46,7 @@ from linksim.bench import (
     run_grid,
     run_kermit_table,
     run_latency,
+    run_transfer_table,
     standard_grid,
     summarize,
 )
@@ -73,6 +77,7 @@ __all__ = [
     "add_latency_arguments",
     "add_pty_arguments",
     "add_relay_arguments",
+    "add_transfer_arguments",
     "codec_main",
     "flood_main",
     "goodput_main",
@@ -80,6 +85,7 @@ __all__ = [
     "latency_main",
     "pty_main",
     "relay_main",
+    "transfer_main",
 ]
 
 
@@ -555,3 +561,140 @@ def relay_main(args: argparse.Namespace) -> int:
             f" ({args.size} bytes, best of {args.repeat})"
         )
     return 0
+
+
+def _transfer_row(text: str) -> TransferRow:
+    """``--rows`` converter: a row's number in the table or ``RATE/DELAY/BER[/PROFILE]``."""
+    try:
+        return parse_transfer_row(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+class _TransferRowChoices:
+    """``--rows``'s choices: every row :func:`_transfer_row` makes (a line outside
+    the issue's table included), listed as the table's numbers.  Given as choices
+    so that tests/test_bad_input_cli.py's matrix knows what values to try; the
+    converter refuses a bad one first, with its own message."""
+
+    def __contains__(self, value: object) -> bool:
+        return isinstance(value, TransferRow)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([str(number) for number in range(1, len(TRANSFER_ROWS) + 1)])
+
+
+def _transfer_rows_listed() -> str:
+    lines = ["the table (issue 21's lines and targets, as share of the line):"]
+    for number, row in enumerate(TRANSFER_ROWS, 1):
+        lines.append(f"  {number}  {row.spec:<24} target {row.target:.2f}")
+    return "\n".join(lines)
+
+
+def add_transfer_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``linksim bench transfer``."""
+    ap.formatter_class = argparse.RawDescriptionHelpFormatter
+    ap.epilog = _transfer_rows_listed()
+    ap.add_argument(
+        "--seeds",
+        type=SEED,
+        nargs="+",
+        default=[1],
+        metavar="N",
+        help="seeds of the files and of the relays' impairments; every row runs once "
+        "per seed (default 1)",
+    )
+    ap.add_argument(
+        "--hints",
+        action="store_true",
+        help="give both ends --baud and --delay (default: the netcat with no options)",
+    )
+    ap.add_argument(
+        "--rows",
+        type=_transfer_row,
+        choices=_TransferRowChoices(),
+        nargs="+",
+        metavar="ROW",
+        help="the rows to run: their numbers in the table below, or lines "
+        "RATE/DELAY/BER[/PROFILE] (PROFILE auto, 8bit or printable; default auto), "
+        "e.g. 2400/1.3/1e-4/auto; a line not in the table has no target (default: all)",
+    )
+    ap.add_argument(
+        "--jobs",
+        type=JOBS,
+        help="transfers at once (default: all of them, as the issue's figures were "
+        "taken); each is three Python processes, and on a small machine transfers "
+        "running at once compete for the CPU, which lowers their shares",
+    )
+    ap.add_argument(
+        "--size",
+        type=SIZE,
+        help="file bytes for every row, for a quick run "
+        "(default: 8 KiB at 2400 bit/s or slower, 32 KiB faster)",
+    )
+    ap.add_argument(
+        "--json", action="store_true", help="print one JSON object per transfer, nothing else"
+    )
+
+
+def _print_transfer_json(record: dict[str, Any]) -> None:
+    print(json.dumps(record), flush=True)
+
+
+def _print_transfer_row(r: dict[str, Any]) -> None:
+    number = "-" if r["row"] is None else str(r["row"])
+    target = "-" if r["target"] is None else f"{r['target']:.2f}"
+    agreed = f"{r['encoding']}/{r['max_packet_len']}"
+    if r["ok"]:
+        below = "" if r["meets_target"] is not False else ", below target"
+        measured = f"{r['line_share']:6.3f} {r['seconds']:6.1f}"
+        ratio = f"{r['ratio_to_limit']:6.3f}"
+        result = f"ok{below}"
+    else:
+        seconds = "-" if r["seconds"] is None else f"{r['seconds']:.1f}"
+        measured, ratio = f"{'-':>6} {seconds:>6}", f"{'-':>6}"
+        result = f"FAILED: {r['error']}"
+    line, profile = r["spec"].rsplit("/", 1)
+    print(
+        f"{number:>2} {line:<15} {profile:<9} {r['seed']:>4} {measured} "
+        f"{r['limit_share']:6.3f} {ratio} {target:>6} {agreed:<13} {result}",
+        flush=True,
+    )
+
+
+def transfer_main(args: argparse.Namespace) -> int:
+    """Entry point (``linksim bench transfer``): exit 0 when every transfer
+    delivered, byte-exact; 1 otherwise."""
+    if args.rows:
+        chosen = list(dict.fromkeys(args.rows))
+        numbers = {row: n for n, row in enumerate(TRANSFER_ROWS, 1)}
+        rows = [(numbers.get(row), row) for row in chosen]
+    else:
+        rows = list(enumerate(TRANSFER_ROWS, 1))
+    seeds = list(dict.fromkeys(args.seeds))
+    show: Callable[[dict[str, Any]], None] = _print_transfer_row
+    if args.json:
+        show = _print_transfer_json
+    else:
+        hints = "both ends given --baud and --delay" if args.hints else "no options"
+        runs = len(rows) * len(seeds)
+        print(
+            f"the netcat through linksim relay, {hints}; {runs} transfers, "
+            f"{min(args.jobs or runs, runs)} at once (wall clock)"
+        )
+        print(
+            f"{'#':>2} {'line':<15} {'profile':<9} {'seed':>4} {'share':>6} {'s':>6} "
+            f"{'limit':>6} {'ratio':>6} {'target':>6} {'agreed':<13} result",
+            flush=True,
+        )
+    records = run_transfer_table(
+        rows, seeds, hints=args.hints, size=args.size, jobs=args.jobs, on_row=show
+    )
+    if not args.json:
+        print(
+            "line: bit/s / one-way delay, s / byte error rate; share: file bytes / seconds "
+            "(sender start to both exits) / (bit/s / 10)\nlimit: the share a perfect ARQ "
+            "reaches with the agreed encoding and packet length (agreed) at the line's "
+            "byte error rate; ratio: share / limit"
+        )
+    return 0 if all(r["ok"] for r in records) else 1

@@ -228,6 +228,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _bench.add_kermit_arguments(bkermit)
     bkermit.set_defaults(func=_bench.kermit_main)
+    btransfer = bench_sub.add_parser(
+        "transfer",
+        help="issue 21's table: the netcat through the relay, beside the limit (wall clock)",
+        description="Issue 21's real-time table: serialsocket listen/connect move a file of\n"
+        "random binary through linksim relay (wall time from starting the sender to\n"
+        "both exits, as a share of the line), beside the theoretical limit for the\n"
+        "encoding and packet length the two ends agree on.  Exit 0: every transfer\n"
+        "delivered, byte-exact.",
+    )
+    _bench.add_transfer_arguments(btransfer)
+    btransfer.set_defaults(func=_bench.transfer_main)
     latency = bench_sub.add_parser(
         "latency", help="command round trip over loopback TCP beside a raw echo (wall clock)"
     )
