@@ -37,10 +37,14 @@ import numpy.typing as npt
 __all__ = [
     "DZ_OFFSET",
     "FRHC_INITIAL",
+    "WORKSPACE_REACH",
+    "WORKSPACE_TURN",
     "HandController",
+    "frhc_deflection",
     "frhc_frames",
     "frhc_jacobian",
     "frhc_pose",
+    "in_workspace",
     "rotvec",
 ]
 
@@ -58,6 +62,13 @@ MAX_FORCE = 35.6
 """N per axis: "capable of generating 8 lbs of force ... in each DOF"."""
 MAX_TORQUE = 1.58
 """N m per axis: 14 in-lb."""
+WORKSPACE_REACH = 0.15
+"""m: the handle stays within this of its neutral position along each base axis (a
+0.30 m cube).  The appendix gives no workspace: this is our model's, about a cubic
+foot in front of the operator; beyond it the operator re-centres with the index
+clutch (seed 004's way of extending the workspace)."""
+WORKSPACE_TURN = math.pi / 2
+"""rad: the handle turns at most this far from its neutral orientation (our model's)."""
 
 
 def _craig(alpha: float, d: float, theta: float) -> Array:
@@ -104,6 +115,24 @@ def frhc_jacobian(q: Array) -> Array:
     return jac
 
 
+def frhc_deflection(q: Array, neutral: Array | None = None) -> Array:
+    """Where joints ``q`` put the handle, as :meth:`HandController.move_handle` takes it:
+    position relative to ``neutral`` (m, base frame; default the appendix's initial
+    pose) and the rotation vector (rad) that turns the neutral orientation into it."""
+    pose = frhc_pose(q)
+    ref = frhc_pose(FRHC_INITIAL) if neutral is None else neutral
+    return np.concatenate([pose[:3, 3] - ref[:3, 3], rotvec(pose[:3, :3] @ ref[:3, :3].T)])
+
+
+def in_workspace(deflection: Array) -> bool:
+    """Whether a handle deflection (position m, rotation vector rad: as
+    :func:`frhc_deflection` gives) is inside :data:`WORKSPACE_REACH` and
+    :data:`WORKSPACE_TURN`, boundaries included."""
+    reach = float(np.max(np.abs(deflection[:3])))
+    turn = float(np.linalg.norm(deflection[3:]))
+    return reach <= WORKSPACE_REACH and turn <= WORKSPACE_TURN
+
+
 def rotvec(r: Array) -> Array:
     """The rotation vector (axis times angle) of a rotation matrix."""
     c = max(-1.0, min(1.0, (float(np.trace(r)) - 1.0) / 2.0))
@@ -145,10 +174,7 @@ class HandController:
 
     def deflection(self) -> Array:
         """Handle position and rotation vector relative to neutral (base frame)."""
-        pose = self.handle_pose()
-        return np.concatenate(
-            [pose[:3, 3] - self.neutral[:3, 3], rotvec(pose[:3, :3] @ self.neutral[:3, :3].T)]
-        )
+        return frhc_deflection(self.q, self.neutral)
 
     def move_handle(self, offset: Array, rotation: Array | None = None) -> None:
         """Put the handle at neutral + ``offset`` (m), turned by ``rotation`` (rad)."""

@@ -6,6 +6,13 @@ vector, rad), whether the index button is held, the trigger, the pose-change
 button.  Between waypoints the intent moves linearly.  The same script gives
 the same samples every time.
 
+In JOINT mode the hand controller's joints drive the arm's joints one to one, so a
+handle path made for the Cartesian modes sends the arm somewhere else: the
+tasks' JOINT scripts are derived from where the Cartesian scripts send the
+*arm* (:func:`joint_script`): the operator moves the handle so that the arm
+goes where the task needs it, re-centring with the index clutch when the handle
+would leave the FRHC's workspace.
+
 Without force reflection the handle is where the hand means it to be.  With
 it, the FRHC's motors push the handle with the reflected force and the hand is
 an impedance (mass, stiffness, damping of a human arm holding a handle:
@@ -21,18 +28,49 @@ and build a :class:`tcpstream.teleop.Sample` of the mode.
 from __future__ import annotations
 
 import bisect
+import itertools
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from linksim.arm import DEFAULT_WORLD, ArmModel, hand_frame
 from tcpstream.teleop import Buttons, Reply, Sample, TeleopMode
 
 from ._contact import Array
-from ._frhc import HandController
-from ._remote import rotation
+from ._frhc import FRHC_INITIAL, HandController, frhc_deflection, in_workspace, rotvec
+from ._remote import RemoteConfig, rotation, solve_hand
 
-__all__ = ["Intent", "Operator", "Script", "Waypoint", "peg_script", "surface_script"]
+__all__ = [
+    "CLUTCH_HOLD",
+    "CLUTCH_RETURN",
+    "JOINT_STEP",
+    "JOINT_TURN_STEP",
+    "Intent",
+    "Operator",
+    "Script",
+    "Waypoint",
+    "joint_script",
+    "peg_script",
+    "surface_script",
+]
+
+JOINT_STEP = 0.005
+"""m of tool travel between two waypoints of a derived JOINT script.  Between
+waypoints the handle moves on a straight line, so the FRHC's joints -- and the
+arm's, one to one -- move on a curve; at 5 mm the tool stays within 0.03 mm of
+the task's straight lines (the encoders' counts add up to 0.4 mm more), where a
+stiff contact turns every millimetre into 20 N."""
+JOINT_TURN_STEP = 0.02
+"""rad of tool turn between two waypoints of a derived JOINT script (as JOINT_STEP)."""
+CLUTCH_HOLD = 0.2
+"""s the handle rests before the index button is released and after it is pressed
+again (as in the INDEX surface script): the clutch never opens or closes on a
+moving handle."""
+CLUTCH_RETURN = 1.0
+"""s to carry the handle back to neutral with the clutch open."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,13 +120,26 @@ class Script:
         return off, rot, a
 
 
-def surface_script(mode: TeleopMode, *, press: float = 0.02, drop: float = 0.10) -> Script:
+def surface_script(
+    mode: TeleopMode,
+    *,
+    press: float = 0.02,
+    drop: float = 0.10,
+    start: Sequence[float] | Array = DEFAULT_WORLD.initial_joints,
+    remote: RemoteConfig | None = None,
+) -> Script:
     """Touch the table ``drop`` below the start, press ``press`` into it, slide 0.15 m, lift.
 
     In INDEX mode the slide is two strokes of 0.075 m with the clutch open
     between them (the handle goes back while the arm stays); in RATE mode the
-    waypoints are deflections (a 0.02 m deflection is 0.02 m/s).
+    waypoints are deflections (a 0.02 m deflection is 0.02 m/s).  In JOINT mode
+    the handle path that moves the arm, from joints ``start`` under ``remote``'s
+    mapping (default :class:`RemoteConfig`), as the CARTESIAN script moves it
+    (:func:`joint_script`); ``start`` and ``remote`` matter only there.
     """
+    if mode is TeleopMode.JOINT:
+        cartesian = surface_script(TeleopMode.CARTESIAN, press=press, drop=drop)
+        return joint_script(cartesian, start, remote)
     z = -(drop + press)
     if mode is TeleopMode.RATE:
         return Script(
@@ -135,11 +186,23 @@ def surface_script(mode: TeleopMode, *, press: float = 0.02, drop: float = 0.10)
 
 
 def peg_script(
-    mode: TeleopMode, *, hole: tuple[float, float] = (0.05, 0.0), above: float = 0.08
+    mode: TeleopMode,
+    *,
+    hole: tuple[float, float] = (0.05, 0.0),
+    above: float = 0.08,
+    start: Sequence[float] | Array = DEFAULT_WORLD.initial_joints,
+    remote: RemoteConfig | None = None,
 ) -> Script:
     """Carry the peg over the hole (3 mm off in y: the operator's error), push it down to
     the bottom of the 40 mm bore and 25 mm on in 2.5 s (the operator cannot see the
-    bottom and feels it 2.6 s late at best), hold, withdraw."""
+    bottom and feels it 2.6 s late at best), hold, withdraw.
+
+    In JOINT mode the handle path that moves the arm as the CARTESIAN script does,
+    from joints ``start`` under ``remote`` (see :func:`surface_script`).
+    """
+    if mode is TeleopMode.JOINT:
+        cartesian = peg_script(TeleopMode.CARTESIAN, hole=hole, above=above)
+        return joint_script(cartesian, start, remote)
     x, y = hole[0], hole[1] + 0.003
     down = -(above + 0.065)
     if mode is TeleopMode.RATE:
@@ -169,6 +232,142 @@ def peg_script(
             Waypoint(14.0, (x, y, 0.0), trigger=255),
         ),
     )
+
+
+def joint_script(
+    handle: Script,
+    start: Sequence[float] | Array = DEFAULT_WORLD.initial_joints,
+    remote: RemoteConfig | None = None,
+) -> Script:
+    """The JOINT-mode script that moves the arm as ``handle`` does in CARTESIAN mode.
+
+    ``handle`` is a position script (CARTESIAN or INDEX; not RATE, whose offsets
+    are velocities).  Its waypoints mean tool targets by
+    :class:`~linksim.teleop.RemoteArm`'s Cartesian mapping under ``remote``
+    (default :class:`RemoteConfig`): the handle's motion while the index button is
+    held, turned into the robot frame by ``hand_to_robot`` and scaled by
+    ``position_scale`` and ``rotation_scale``, added to the tool's pose at the
+    arm's joints ``start`` (world frame, as the runs send it; turns are composed
+    about one axis, exact for the tasks, whose handles do not turn).  Between
+    waypoints the target moves on a straight line, taken every
+    :data:`JOINT_STEP` m or :data:`JOINT_TURN_STEP` rad.  For each target the
+    arm's joints are solved from the previous ones (:func:`solve_hand`, so the
+    arm stays on the branch it starts on), their change divided by
+    ``joint_scale`` is the FRHC's joint change from :data:`FRHC_INITIAL`, and the
+    FRHC's forward kinematics give the handle offset and rotation the operator
+    holds (:func:`frhc_deflection`, the inverse of what
+    :meth:`HandController.move_handle` solves).
+
+    When the next handle pose would leave the FRHC's workspace
+    (:func:`in_workspace`) the operator re-centres: holds :data:`CLUTCH_HOLD`,
+    releases the index button, carries the handle back to neutral in
+    :data:`CLUTCH_RETURN`, holds, presses it again -- the increments made with the
+    clutch open are never added, so the arm holds -- and the later handle poses
+    count from the arm's joints there.  Each re-centre makes the script
+    ``2 * CLUTCH_HOLD + CLUTCH_RETURN`` longer than ``handle``.  Every waypoint is
+    otherwise engaged; the trigger and the pose-change button follow ``handle``'s
+    segments.  Deterministic: the same arguments give the same script.
+
+    Raises :class:`ValueError` for a turning base (``base_rate``), a zero joint
+    scale, a target the arm cannot reach or reaches only beyond its joint limits
+    (the remote would clip), or a single step that leaves the workspace even
+    from neutral.
+    """
+    cfg = RemoteConfig() if remote is None else remote
+    if cfg.base_rate != 0.0:
+        raise ValueError("joint_script: a turning base has no fixed handle-to-robot mapping")
+    scale = np.array(cfg.joint_scale, dtype=np.float64)
+    if scale.shape != (6,) or bool(np.any(scale == 0.0)):
+        raise ValueError(f"joint_script: joint_scale must be six non-zero factors, got {scale}")
+    q = np.array(start, dtype=np.float64)
+    frame = hand_frame(cfg.model, q)
+    p0, r0 = frame[:3, 3].copy(), frame[:3, :3].copy()
+    targets = _tool_path(handle, cfg)
+    out: list[Waypoint] = []
+    base = q.copy()  # the arm's joints when the handle was last at neutral
+    shift = 0.0  # seconds of re-centring so far
+    for t, move, seg in targets:
+        previous = q
+        q = _reach(cfg.model, q, p0 + move[:3], rotation(move[3:]) @ r0)
+        deflection = frhc_deflection(FRHC_INITIAL + (q - base) / scale)
+        if not in_workspace(deflection) and out:
+            shift += _recentre(out)
+            base = previous
+            deflection = frhc_deflection(FRHC_INITIAL + (q - base) / scale)
+        if not in_workspace(deflection):
+            raise ValueError(
+                f"joint_script: at {t:g} s one step takes the handle out of the FRHC's "
+                "workspace even from neutral"
+            )
+        out.append(
+            Waypoint(
+                t + shift,
+                _three(deflection[:3]),
+                _three(deflection[3:]),
+                trigger=seg.trigger,
+                pose_change=seg.pose_change,
+            )
+        )
+    return Script(handle.name, tuple(out))
+
+
+def _tool_path(handle: Script, cfg: RemoteConfig) -> list[tuple[float, Array, Waypoint]]:
+    """The tool's targets along ``handle``, as (time, tool move from the start: position
+    m and rotation vector rad, robot frame; the waypoint whose buttons hold)."""
+    to_robot = rotation(np.array(cfg.hand_to_robot))
+    ws = handle.waypoints
+    path: list[tuple[float, Array, Waypoint]] = [(ws[0].t, np.zeros(6), ws[0])]
+    move = np.zeros(6)
+    for a, b in itertools.pairwise(ws):
+        step = np.zeros(6)
+        if a.engaged:  # the Operator adds a segment's increments only while it is engaged
+            step[:3] = cfg.position_scale * (to_robot @ (np.array(b.offset) - np.array(a.offset)))
+            step[3:] = cfg.rotation_scale * (
+                to_robot @ (np.array(b.rotation) - np.array(a.rotation))
+            )
+        n = max(
+            1,
+            math.ceil(float(np.linalg.norm(step[:3])) / JOINT_STEP),
+            math.ceil(float(np.linalg.norm(step[3:])) / JOINT_TURN_STEP),
+        )
+        for k in range(1, n + 1):
+            # Inside a segment the script holds a's buttons; from b.t on, b's.
+            t = b.t if k == n else a.t + k / n * (b.t - a.t)
+            path.append((t, move + k / n * step, b if k == n else a))
+        move = move + step
+    return path
+
+
+def _reach(model: ArmModel, q: Array, p: Array, r: Array) -> Array:
+    """The arm's joints for hand position ``p`` and orientation ``r``, from ``q``: exact
+    (1 nm, 1 nrad) and within the joint limits, or ValueError."""
+    # The control tick's solver, run to convergence: from the previous target, a few
+    # millimetres away, it converges in a handful of steps on the same branch.
+    solved = solve_hand(model, q, p, r, iterations=100)
+    frame = hand_frame(model, solved)
+    err = np.concatenate([p - frame[:3, 3], rotvec(r @ frame[:3, :3].T)])
+    if float(np.max(np.abs(err))) > 1e-9:
+        raise ValueError(f"joint_script: the arm cannot reach {p} (m) from {q} (rad)")
+    if bool(np.any(solved < model.lower_array)) or bool(np.any(solved > model.upper_array)):
+        raise ValueError(f"joint_script: reaching {p} (m) needs joints {solved} beyond the limits")
+    return solved
+
+
+def _recentre(out: list[Waypoint]) -> float:
+    """Append the index-clutch re-centre after ``out[-1]``; returns the seconds it takes."""
+    last = out[-1]
+    hold, back = last.t + CLUTCH_HOLD, last.t + CLUTCH_HOLD + CLUTCH_RETURN
+    zero = (0.0, 0.0, 0.0)
+    out += [
+        Waypoint(hold, last.offset, last.rotation, False, last.trigger, last.pose_change),
+        Waypoint(back, zero, zero, False, last.trigger, last.pose_change),
+        Waypoint(back + CLUTCH_HOLD, zero, zero, True, last.trigger, last.pose_change),
+    ]
+    return 2 * CLUTCH_HOLD + CLUTCH_RETURN
+
+
+def _three(v: Array) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
 
 
 @dataclass

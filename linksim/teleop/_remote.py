@@ -5,9 +5,15 @@ Every control tick (:meth:`RemoteArm.step`) the arm takes the newest sample
 servo against the contact model, solves the joints, and answers with a
 :class:`tcpstream.teleop.Reply`:
 
-* **JOINT**: the hand controller's joint increments, scaled per joint, move the
-  arm's joints directly (no singularity check: seed 004 uses joint mode "to
-  move the robot out of kinematic singular positions").
+* **JOINT**: the hand controller's joint increments, scaled per joint, set a
+  joint target (no singularity check: seed 004 uses joint mode "to move the
+  robot out of kinematic singular positions").  Without SHARED_COMPLIANCE the
+  joints are driven straight to it at full joint speed (a rigid press).  With
+  SHARED_COMPLIANCE the local compliant force control acts as in the other
+  modes: the target's forward kinematics is the commanded hand pose, the
+  compliant servo below yields to contact, and the joints are solved from the
+  target itself (in free space they land on it exactly; in contact only the
+  yielded position differs).
 * **CARTESIAN / INDEX**: dX_h, rotated into the robot's frame by the 6x6
   block rotation ``[[R, 0], [0, R]]`` (constant, or turning with a moving
   base), scaled, added to the commanded pose in the world or the tool frame.
@@ -41,13 +47,22 @@ from tcpstream.teleop import Buttons, ContactFlags, Reply, ReplyStatus, Sample, 
 from ._contact import Array, ContactModel, Wrench
 from ._frhc import rotvec
 
-__all__ = ["RemoteArm", "RemoteConfig", "RemoteStatistics", "rate_deadman", "rotation"]
+__all__ = [
+    "RemoteArm",
+    "RemoteConfig",
+    "RemoteStatistics",
+    "rate_deadman",
+    "rotation",
+    "solve_hand",
+]
 
 _SINGULAR = (0.05, 0.05, 0.05)
 """Shoulder (m), elbow (rad), wrist (rad) margins: linksim.arm's singular regions."""
 _SUBSTEPS = 8
 """Servo integration steps per control tick: 1 ms at 125 Hz, well inside the
 contact's 2/omega stability bound (omega = sqrt(20 kN/m / 2 kg) = 100 rad/s)."""
+_SEED_ITERATIONS = 10
+"""Solver steps from JOINT mode's target: the servo's hand may lag it by centimetres."""
 
 
 def rotation(v: Array) -> Array:
@@ -142,6 +157,36 @@ def _jacobian(model: ArmModel, q: Array) -> Array:
         jac[:3, j] = np.cross(z, p - frames[j][:3, 3])
         jac[3:, j] = z
     return jac
+
+
+def solve_hand(
+    model: ArmModel,
+    q: Array,
+    p: Array,
+    r: Array,
+    *,
+    iterations: int = 3,
+    damping: float = 1e-4,
+    tolerance: float = 1e-10,
+) -> Array:
+    """The arm's damped-least-squares solver: joints that put the hand at ``p`` (m, base
+    frame) turned ``r`` (3x3), starting from ``q``.
+
+    At most ``iterations`` steps, stopping once every position (m) and rotation (rad)
+    error is below ``tolerance``; the defaults are the control tick's (a few steps from
+    last tick's joints, never far from the answer).  Returns new joints and leaves ``q``
+    alone; no joint limits, no singularity check, no convergence check: a caller that
+    needs the exact answer checks :func:`linksim.arm.hand_frame` of the result.
+    """
+    q = np.array(q, dtype=np.float64)
+    for _ in range(iterations):
+        frame = hand_frame(model, q)
+        err = np.concatenate([p - frame[:3, 3], rotvec(r @ frame[:3, :3].T)])
+        if float(np.max(np.abs(err))) < tolerance:
+            break
+        jac = _jacobian(model, q)
+        q = q + jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(6), err)
+    return q
 
 
 def _singular(model: ArmModel, q: Array) -> int | None:
@@ -293,7 +338,10 @@ class RemoteArm:
             self.p_cmd = self.p_cmd + self.rate[:3] * dt
             self.r_cmd = rotation(self.rate[3:] * dt) @ self.r_cmd
         if self.mode is TeleopMode.JOINT and not held:
-            self._joint_tick(dt)
+            if self.buttons & Buttons.SHARED_COMPLIANCE:
+                self._compliant_joint_tick(dt)
+            else:
+                self._joint_tick(dt)
         else:
             self._cartesian_tick(dt)
         self._contact_tick(now)
@@ -312,7 +360,14 @@ class RemoteArm:
         self.p_cmd, self.r_cmd, self.p_ref = self.p.copy(), self.r.copy(), self.p.copy()
         self.wrench = self.contact.wrench(self.p, self.v, self._wrist())
 
-    def _cartesian_tick(self, dt: float) -> None:
+    def _compliant_joint_tick(self, dt: float) -> None:
+        """JOINT mode with shared compliance: the joint target, through its forward
+        kinematics, commands the compliant Cartesian tick, which yields to contact."""
+        frame = hand_frame(self.model, self.q_target)
+        self.p_cmd, self.r_cmd = frame[:3, 3].copy(), frame[:3, :3].copy()
+        self._cartesian_tick(dt, seed=self.q_target)
+
+    def _cartesian_tick(self, dt: float, *, seed: Array | None = None) -> None:
         cfg = self.config
         shared = bool(self.buttons & Buttons.SHARED_COMPLIANCE)
         h = dt / _SUBSTEPS
@@ -330,7 +385,7 @@ class RemoteArm:
             v = v + acc * h
             p = p + v * h
             self._record(w)
-        self._solve(p, v, dt)
+        self._solve(p, v, dt, seed=seed)
 
     def _admittance(self, w: Wrench) -> Array:
         """Shared compliance: the velocity of the servo's reference.
@@ -356,16 +411,16 @@ class RemoteArm:
             vel = vel * (cfg.approach_speed / speed)
         return np.asarray(vel)
 
-    def _solve(self, p: Array, v: Array, dt: float) -> None:
-        """Joints for hand position ``p`` and orientation ``r_cmd``: damped least squares."""
-        q = self.q.copy()
-        for _ in range(3):
-            frame = hand_frame(self.model, q)
-            err = np.concatenate([p - frame[:3, 3], rotvec(self.r_cmd @ frame[:3, :3].T)])
-            if float(np.max(np.abs(err))) < 1e-10:
-                break
-            jac = _jacobian(self.model, q)
-            q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-4 * np.eye(6), err)
+    def _solve(self, p: Array, v: Array, dt: float, *, seed: Array | None = None) -> None:
+        """Joints for hand position ``p`` and orientation ``r_cmd``: damped least squares.
+
+        From last tick's joints; or, in JOINT mode (``seed``, the joint target), from the
+        target, to the exact answer and with no singularity check.
+        """
+        if seed is None:
+            q = solve_hand(self.model, self.q, p, self.r_cmd)
+        else:
+            q = solve_hand(self.model, seed, p, self.r_cmd, iterations=_SEED_ITERATIONS)
         vmax = np.asarray(self.model.max_velocity) * dt
         step = q - self.q
         worst = float(np.max(np.abs(step) / vmax))
@@ -377,7 +432,7 @@ class RemoteArm:
             self.flags |= ContactFlags.JOINT_LIMIT
             self.stats.joint_limit_hits += 1
             q = np.clip(q, lo, hi)
-        region = _singular(self.model, q)
+        region = None if seed is not None else _singular(self.model, q)
         if region is not None and _singular(self.model, self.q) != region:
             if self.buttons & Buttons.POSE_CHANGE:
                 self.stats.pose_changes += 1

@@ -149,11 +149,15 @@ class TeleopReport:
 
 
 def script_for(task: str, mode: TeleopMode) -> Script:
+    """The task's script in ``mode``; the JOINT one is derived from the arm's start
+    joints (:func:`world_for`'s) under the default :class:`RemoteConfig` mapping, as
+    :func:`run_teleop` builds the arm."""
+    if task not in ("surface", "peg"):
+        raise ValueError(f"task must be surface or peg, got {task!r}")
+    start = world_for(task)[1]
     if task == "surface":
-        return surface_script(mode, drop=TABLE_DROP)
-    if task == "peg":
-        return peg_script(mode, hole=(0.05, 0.0), above=0.08)
-    raise ValueError(f"task must be surface or peg, got {task!r}")
+        return surface_script(mode, drop=TABLE_DROP, start=start)
+    return peg_script(mode, hole=(0.05, 0.0), above=0.08, start=start)
 
 
 def world_for(task: str) -> tuple[ContactModel, np.ndarray[Any, np.dtype[np.float64]]]:
