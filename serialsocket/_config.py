@@ -20,6 +20,7 @@ from ._params import (
     DENSE_FEATURES,
     FEATURE_EXPEDITED,
     FEATURE_XON_XOFF,
+    LANE_EARLY,
     LANE_LATEST,
     MAX_LONG_WINDOW,
 )
@@ -27,7 +28,9 @@ from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
     "DEFAULT_BUFFER_CAP",
+    "DEFAULT_EARLY_DATA",
     "IDLE_COPY_MIN_PACKETS",
+    "MAX_EARLY_DATA",
     "MAX_IDLE_COPIES",
     "MAX_WINDOW",
     "MIN_CONNECT_TIMEOUT",
@@ -85,6 +88,15 @@ IDLE_COPY_MIN_PACKETS = 8
 """Idle copies (``EndpointConfig.idle_copies``) are sent only when the round
 trip is at least this many full packets' transmit times: on a shorter line a
 repair costs a few packet times, and copies would only double the ACKs."""
+
+DEFAULT_EARLY_DATA = 256
+"""Bytes of the stream a connection request may carry by default; the init's
+own bound (PROTOCOL.md 13) takes fewer on short lines: about 35 bytes of
+random binary (60 of text) at 1.3 s one way, all 256 at 300 s."""
+
+MAX_EARLY_DATA = 512
+"""Most bytes ``EndpointConfig.early_data`` may ask for (the init's limit,
+:data:`~serialsocket._params.EARLY_INIT_LIMIT` characters, may take fewer)."""
 
 MAX_IDLE_COPIES = 3
 """Most extra copies of one packet: at a packet error rate of 5 % (512
@@ -158,7 +170,14 @@ class EndpointConfig:
             repaired once a newer one exists (:meth:`Endpoint.send_latest`;
             tcpstream's teleoperation samples and replies use it).  On by
             default (with ``expedited``; one more init character); False
-            sends the init without XLANES.
+            clears its XLANES bit.
+        early_data: at most this many bytes of the stream, queued with
+            ``send`` before ``connect``, ride in the connection request
+            (XLANES bit 2 beside the expedited lane, PROTOCOL.md section 13):
+            the first byte arrives one one-way delay after connecting instead
+            of three.  A listener takes early data unless this is 0.  The
+            init's own bound (half a packet, or 0.5 % of the round trip with
+            the rate and delay given; PROTOCOL.md 13) may take fewer bytes.
         xon_xoff: the line uses software flow control: the escape code must
             escape XON/XOFF as well (declared in XCAPAS, bit 32).
         one_way_delay: a hint, where estimation starts: the link's one-way
@@ -241,6 +260,7 @@ class EndpointConfig:
     dense: bool = False
     expedited: bool = True
     latest: bool = True
+    early_data: int = DEFAULT_EARLY_DATA
     xon_xoff: bool = False
     one_way_delay: float = 0.0
     line_rate: float | None = None
@@ -292,6 +312,8 @@ class EndpointConfig:
                 raise bad(name, value, "None (derived) or seconds > 0")
         if self.max_retries is not None and self.max_retries < 1:
             raise bad("max_retries", self.max_retries, "None (unlimited) or >= 1")
+        if not 0 <= self.early_data <= MAX_EARLY_DATA:
+            raise bad("early_data", self.early_data, f"0 (none)..{MAX_EARLY_DATA} bytes")
         if not 0 <= self.idle_copies <= MAX_IDLE_COPIES:
             raise bad("idle_copies", self.idle_copies, f"0..{MAX_IDLE_COPIES}")
 
@@ -436,7 +458,10 @@ class EndpointConfig:
     def init_lanes(self) -> int | None:
         """The XLANES bits this side offers (PROTOCOL.md section 12), or None
         for no XLANES field (it rides with the expedited lane's bit 16)."""
-        return LANE_LATEST if self.latest and self.expedited else None
+        if not self.expedited:
+            return None
+        lanes = (LANE_LATEST if self.latest else 0) | (LANE_EARLY if self.early_data else 0)
+        return lanes or None
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:
         """Data characters per packet for a negotiated length and check."""

@@ -73,6 +73,9 @@ from ._latest import (
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
 from ._params import (
+    EARLY_ENCODING,
+    EARLY_INIT_LIMIT,
+    LANE_EARLY,
     LONG_SEQ_MODULUS,
     DataCodec,
     InitParameters,
@@ -233,6 +236,14 @@ class EndpointStatistics:
     doubled_resends: int = 0
     """Resends of packets already resent once, sent twice on a long line
     (PROTOCOL.md 4.4); the second copy is not counted in ``retransmissions``."""
+    early_sent: int = 0
+    """Bytes of our stream our connection request carried (early data,
+    PROTOCOL.md section 13)."""
+    early_delivered: int = 0
+    """Of those, bytes the listener's answer says it delivered (the rest, if
+    any, went as ordinary data)."""
+    early_received: int = 0
+    """Bytes of the peer's stream delivered from its connection request."""
 
 
 class Endpoint:
@@ -286,6 +297,12 @@ class Endpoint:
     _xrecv: ExpeditedReceiver
     _lsend: LatestSender
     _lrecv: LatestReceiver
+    _early: bytes | None
+    """Our early data, fixed at the first init (None: no init sent yet)."""
+    _early_chars: int
+    """Characters the early data added to the init (XEARLY)."""
+    _early_in: bytes | None
+    """The peer's early data, taken, delivered at establishment."""
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -307,6 +324,7 @@ class Endpoint:
             max_length=self._max_length,
             check=BlockCheck.CRC16,
             init_check=BlockCheck.CRC16,
+            init_max_length=EARLY_INIT_LIMIT,  # an I may carry early data (PROTOCOL.md 13)
             error_fallback=False,
         )
         self._rate = RateEstimator(self._rate_hint())
@@ -322,6 +340,8 @@ class Endpoint:
             (
                 "packets_sent",
                 "packets_received",
+                "early_delivered",
+                "early_received",
                 "wire_bytes_sent",
                 "wire_bytes_received",
                 "retransmissions",
@@ -358,7 +378,14 @@ class Endpoint:
         self._go(Trigger.LISTEN)
 
     def connect(self, now: float) -> None:
-        """Send an init packet and retransmit it until answered or the deadline passes."""
+        """Send an init packet and retransmit it until answered or the deadline passes.
+
+        Bytes already queued with :meth:`send` ride in the init packet, up to
+        ``EndpointConfig.early_data`` of them (early data, PROTOCOL.md
+        section 13): a listener that takes them delivers them one one-way
+        delay after this call, before its answer is back.  Whatever it does
+        not take goes as ordinary data once connected, so each byte is
+        delivered exactly once either way."""
         self._go(Trigger.CONNECT)
         self._connect_deadline = now + self.config.derived_connect_timeout()
         self._send_init(now)
@@ -374,6 +401,7 @@ class Endpoint:
         if self._pending_request is None or self._state is not State.LISTEN:
             raise LocalProtocolError("refuse() needs a pending ConnectionRequested in LISTEN")
         self._pending_request = None
+        self._early_in = None  # refused: nothing delivered
         self._queue_error(reason)
 
     def send(self, data: bytes | bytearray | memoryview, now: float) -> int:
@@ -826,6 +854,9 @@ class Endpoint:
             latest_superseded=self._lrecv.superseded,
             idle_copies=c["idle_copies"],
             doubled_resends=c["doubled_resends"],
+            early_sent=len(self._early or b""),
+            early_delivered=c["early_delivered"],
+            early_received=c["early_received"],
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -869,6 +900,9 @@ class Endpoint:
         self._init_sent_at = 0.0
         self._first_init_at = 0.0
         self._init_transmissions = 0
+        self._early = None
+        self._early_chars = 0
+        self._early_in = None
         self._answer_sent_at = 0.0
         self._answers = 0
         self._window_key = None
@@ -890,13 +924,57 @@ class Endpoint:
         log.debug("state %s -> %s (%s)", old.value, self._state.value, trigger.value)
 
     def _send_init(self, now: float) -> None:
-        init = Packet(seq=0, type=PacketType.INIT, data=self._mine.encode())
-        self._control.append(build_packet(init, BlockCheck.CRC16))
+        if self._early is None:
+            # Fixed at the first copy: every resend carries the same bytes,
+            # which stay at the head of the send queue until the answer.
+            self._early = self._early_bytes()
+            self._early_chars = len(EARLY_ENCODING.encode(self._early)) + 2 if self._early else 0
+        init = Packet(seq=0, type=PacketType.INIT, data=self._mine.with_early(self._early).encode())
+        wire = build_packet(init, BlockCheck.CRC16)
+        self._control.append(wire)
         if self._init_transmissions == 0:
             self._first_init_at = now
         self._init_sent_at = now
         self._init_transmissions += 1
-        self._init_deadline = now + self._rtt.timeout()
+        # The timeout covers a full packet; a longer init takes longer to send.
+        self._init_deadline = now + self._rtt.timeout() + self._init_extra_time()
+
+    def _init_extra_time(self) -> float:
+        """Seconds the early data adds to the init on the line (0 with none,
+        or with the rate unknown)."""
+        if not self._early:
+            return 0.0
+        extra = len(EARLY_ENCODING.encode(self._early)) + 2
+        return self.config.transmit_time(extra)
+
+    def _early_bytes(self) -> bytes:
+        """The head of the send queue that fits in the init (PROTOCOL.md 13).
+
+        At most ``early_data`` bytes in an init of at most EARLY_INIT_LIMIT
+        characters, and early data lengthens the init by no more than half a
+        full packet, or 0.5 % of the round trip with the line's rate and
+        delay given, whichever is more.  The init's answer is the rate
+        estimator's reference round trip, which allows one packet's transmit
+        time plus jitter (up to 1 % of the path) for error
+        (serialsocket._rate ``fast_evidence``); early data may use half of
+        that.  A reference longer made every data sample look early and the
+        pacer ramped past the line: 90 timeouts in a 26 KB transfer at
+        2400 bit/s and 1.3 s with 455 characters of early data; 3 times the
+        line at 9600 bit/s and 0.27 s with one packet's worth."""
+        queue, limit = self._sender.queue, self.config.early_data
+        if not queue or not limit or self._mine.lanes is None:
+            return b""
+        take = bytes(queue[:limit])
+        cfg = self.config
+        allowed = self._max_length // 2
+        if cfg.line_rate is not None:
+            per_second = cfg.line_rate / cfg.bits_per_char
+            allowed = max(allowed, int(0.005 * 2 * cfg.one_way_delay * per_second))
+        # What the init may hold besides its own fields, header and check.
+        room = min(EARLY_INIT_LIMIT - len(self._mine.encode()) - 2 - 7 - 3, allowed - 2)
+        while take and len(EARLY_ENCODING.encode(take)) > room:
+            take = take[: len(take) * max(room, 0) // len(EARLY_ENCODING.encode(take))]
+        return take
 
     def _on_init(self, packet: Packet, now: float) -> None:
         st = self._state
@@ -929,7 +1007,16 @@ class Endpoint:
                 # features both know, and nothing to a request without XCAPAS.
                 mine = mine.answer(theirs, self._long_offer())
             agreed = negotiate(mine, theirs)
-            self._answer_with = mine
+            self._early_in = None
+            if st is State.LISTEN and theirs.early and (mine.lanes or 0) & LANE_EARLY:
+                # Taken: delivered when the connection is (the answer says so).
+                self._early_in = theirs.early
+                self._answer_with = mine
+            else:
+                # Not taken (none sent, refused by configuration, or a
+                # simultaneous open): the answer says nothing was delivered,
+                # and the connector sends those bytes as ordinary data.
+                self._answer_with = mine.without_early()
         except RemoteProtocolError as exc:
             log.info("refusing connection: %s", exc)
             self._queue_error(exc.error_hint)
@@ -947,12 +1034,20 @@ class Endpoint:
         if not allowed(self._state, Trigger.INIT_ACKED):
             return
         try:
-            agreed = negotiate(self._mine, InitParameters.decode(packet.data))
+            theirs = InitParameters.decode(packet.data)
+            agreed = negotiate(self._mine, theirs)
         except RemoteProtocolError as exc:
             self._finish_abort(exc.error_hint, by_peer=False, send=True)
             return
+        if self._early and (theirs.lanes or 0) & LANE_EARLY:
+            # The listener delivered our early data: it is not sent again.
+            del self._sender.queue[: len(self._early)]
+            self._sender.bytes_acked += len(self._early)
+            self._counters["early_delivered"] += len(self._early)
         if self._init_transmissions == 1:
             # The init went out once: its answer is a valid RTT sample (Karn).
+            # Early data made it longer by at most what the rate estimator's
+            # reference allows for (see _early_bytes).
             self._rtt.sample(now - self._init_sent_at)
             self._measured()
         else:
@@ -1002,6 +1097,11 @@ class Endpoint:
             self._answers = 1
             self._answer_init()
         self._events.append(Connected(parameters=agreed))
+        if answer and self._early_in:
+            # Early data comes before any data packet (PROTOCOL.md 13).
+            self._receiver.deliver(self._early_in)
+            self._counters["early_received"] += len(self._early_in)
+            self._early_in = None
 
     def _answer_init(self) -> None:
         self._control.append(
@@ -1172,8 +1272,15 @@ class Endpoint:
         base = self._rate.base_rtt
         for pkt in delivered:
             rtt = now - pkt.done_at
+            # The init's answer, the reference of fast_evidence, waited for
+            # our early data too: a data packet's round trip is compared as
+            # if it had, at the delivery rate the ACK clock measured (not a
+            # hint: one too low made every sample look late, and the rate
+            # was never corrected; 0.56 of the line instead of 0.98).
+            line = self._rate.measured
+            waited = self._early_chars / line if line else 0.0
             early = not self._rate.plausible(rtt, self._rtt.rttvar) or self._rate.fast_evidence(
-                rtt, self._tx(len(pkt.wire)), self._rtt.rttvar
+                rtt + waited, self._tx(len(pkt.wire)), self._rtt.rttvar
             )
             if not early:
                 # A packet that arrived sooner than the path allows left

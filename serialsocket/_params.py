@@ -33,8 +33,14 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
                  lane, 32 = escape XON/XOFF too
  24   XWINDO     three chars, tochar of 6 bits each, most significant first:
                  the window offered with long sequence numbers (with XCAPAS 1)
- 25   XLANES     tochar(further lanes offered): 1 = the latest-value lane
-                 (with XCAPAS 16, after XWINDO when that is present)
+ 25   XLANES     tochar(further lanes offered): 1 = the latest-value lane,
+                 2 = early data (with XCAPAS 16, after XWINDO when that
+                 is present)
+ 26   XEARLY     only in an ``I`` with XLANES bit 2: two chars, tochar of 6
+                 bits each, most significant first: the number ``n`` of
+                 characters that follow, then ``n`` characters: the first
+                 bytes of the stream, prefix-encoded as the classic
+                 printable profile (``#``, ``&``, no repeat counts)
 ====  =========  ==========================================================
 
 MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
@@ -50,6 +56,7 @@ so a peer that sends none gets exactly the classic 26-character answer.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ._checks import BlockCheck
@@ -60,11 +67,14 @@ from ._wire import MAX_PACKET_LENGTH, MIN_PACKET_LENGTH, ctl, tochar, unchar
 
 __all__ = [
     "DENSE_FEATURES",
+    "EARLY_ENCODING",
+    "EARLY_INIT_LIMIT",
     "FEATURE_CRC32",
     "FEATURE_ESCAPE",
     "FEATURE_EXPEDITED",
     "FEATURE_RADIX91",
     "FEATURE_XON_XOFF",
+    "LANE_EARLY",
     "LANE_LATEST",
     "LONG_SEQ_MODULUS",
     "MAX_LONG_WINDOW",
@@ -107,11 +117,23 @@ FEATURE_EXPEDITED = 16
 """XCAPAS bit: I speak the expedited lane (PROTOCOL.md section 11); agreed when
 both set it."""
 FEATURE_XON_XOFF = 32
+"""XCAPAS bit: my line uses software flow control: the escape code must
+escape XON/XOFF (:data:`~serialsocket._dense.XON_XOFF`) too."""
 LANE_LATEST = 1
 """XLANES bit (the field after XCAPAS and XWINDO, sent with XCAPAS bit 16): I
 speak the latest-value lane (PROTOCOL.md section 12); agreed when both set it."""
-"""XCAPAS bit: my line uses software flow control: the escape code must
-escape XON/XOFF (:data:`~serialsocket._dense.XON_XOFF`) too."""
+LANE_EARLY = 2
+"""XLANES bit, early data (PROTOCOL.md section 13).  In an ``I``: the first
+bytes of my stream follow in the XEARLY field.  In a listener's own
+parameters: I take early data.  In a ``Y``: your early data was delivered, all
+of it (nothing was delivered when the bit is clear)."""
+EARLY_INIT_LIMIT = 1024
+"""The longest ``I`` a listener accepts whatever its own maximum packet length
+(MARK through CHECK): room for early data before any length is negotiated."""
+EARLY_ENCODING = Encoding(rept=None)
+"""Early data's encoding: the classic printable profile, fixed (nothing is
+negotiated yet), without repeat counts (so a byte count never splits a run)."""
+_EARLY_FIELD_MAX = 64 * 64 - 1
 DENSE_FEATURES = FEATURE_ESCAPE | FEATURE_RADIX91
 """What a telelink endpoint of this version decodes: offered with
 ``EndpointConfig(dense=True)``."""
@@ -187,9 +209,11 @@ class InitParameters:
             None when the init carries no XCAPAS at all (a classic or older
             peer; then nothing of PROTOCOL.md section 10 is used).  Bits this
             version does not know are kept as received and never agreed.
-        lanes: the XLANES bits (:data:`LANE_LATEST`), or None when the init
-            carries no XLANES (it needs XCAPAS bit 16: an older telelink
-            sends none, and reads past what it does not know).
+        lanes: the XLANES bits (:data:`LANE_LATEST`, :data:`LANE_EARLY`), or
+            None when the init carries no XLANES (it needs XCAPAS bit 16: an
+            older telelink sends none, and reads past what it does not know).
+        early: the early data an ``I`` carries (XEARLY, with
+            :data:`LANE_EARLY`), or None.
     """
 
     max_packet_length: int
@@ -204,6 +228,7 @@ class InitParameters:
     long_window: int | None = None
     features: int | None = None
     lanes: int | None = None
+    early: bytes | None = None
 
     @classmethod
     def mine(
@@ -279,8 +304,23 @@ class InitParameters:
             self,
             features=features,
             lanes=lanes,
+            early=None,
             long_window=long_window if theirs.long_window is not None else None,
         )
+
+    def with_early(self, data: bytes) -> InitParameters:
+        """These parameters as an ``I`` that carries ``data`` as early data
+        (none, when ``data`` is empty or no XLANES field goes out)."""
+        if self.lanes is None:
+            return self
+        if not data:
+            return dataclasses.replace(self, lanes=self.lanes & ~LANE_EARLY, early=None)
+        return dataclasses.replace(self, lanes=self.lanes | LANE_EARLY, early=bytes(data))
+
+    def without_early(self) -> InitParameters:
+        """These parameters with no early data and the bit clear: the answer
+        of a side that does not deliver the other's early data."""
+        return self.with_early(b"")
 
     def encode(self) -> bytes:
         """The init data field (all printable, no prefixing needed)."""
@@ -321,6 +361,12 @@ class InitParameters:
                 fields += encode18(self.long_window)
             if xcaps & FEATURE_EXPEDITED and self.lanes is not None:
                 fields.append(tochar(self.lanes))
+                if self.lanes & LANE_EARLY and self.early is not None:
+                    encoded = EARLY_ENCODING.encode(self.early)
+                    if len(encoded) > _EARLY_FIELD_MAX:
+                        raise ValueError(f"early data encodes to {len(encoded)} characters")
+                    fields += (tochar(len(encoded) >> 6), tochar(len(encoded) & 63))
+                    fields += encoded
         return bytes(fields)
 
     @classmethod
@@ -380,6 +426,7 @@ class InitParameters:
         long_window = None
         features = None
         lanes = None
+        early = None
         if j < len(data):
             sysid_len = unchar(data[j])
             sysid = data[j + 1 : j + 1 + sysid_len]
@@ -404,6 +451,8 @@ class InitParameters:
                         lanes = unchar(data[at_lanes])
                         if not 0 <= lanes <= 94:
                             raise bad("XLANES")
+                        if lanes & LANE_EARLY and at_lanes + 1 < len(data):
+                            early = _decode_early(data[at_lanes + 1 :], bad)
         return cls(
             max_packet_length=max(max_len, MIN_PACKET_LENGTH),
             window=window,
@@ -417,7 +466,20 @@ class InitParameters:
             long_window=long_window,
             features=features,
             lanes=lanes,
+            early=early,
         )
+
+
+def _decode_early(field: bytes, bad: Callable[[str], RemoteProtocolError]) -> bytes:
+    """The XEARLY field: two count characters, then exactly that many
+    characters of printable-profile encoding (the init's last field)."""
+    hi, lo = unchar(field[0]), unchar(field[1]) if len(field) > 1 else -1
+    if not (0 <= hi < 64 and 0 <= lo < 64) or len(field) != 2 + (hi << 6 | lo):
+        raise bad("XEARLY")
+    try:
+        return EARLY_ENCODING.decode(field[2:])
+    except RemoteProtocolError as exc:  # MalformedDataError: a dangling prefix
+        raise bad("XEARLY") from exc
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

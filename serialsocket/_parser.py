@@ -21,8 +21,9 @@ in data.  So:
   one damaged packet costs one rejection event, not a cascade.
 
 Every damaged input is a counted :class:`PacketRejected` event, never an
-exception.  The buffer never holds more than one packet of ``max_length`` plus
-the bytes of the last chunk that follow it.
+exception.  The buffer never holds more than one packet of ``max_length`` (or
+``init_max_length`` for an init packet) plus the bytes of the last chunk that
+follow it.
 """
 
 from __future__ import annotations
@@ -183,6 +184,9 @@ class PacketParser:
         check: the block check expected on ordinary packets.
         init_check: the block check of S and I packets: type 1 as Kermit
             requires, or CRC-16 when FORCE-3 ("5") was agreed.
+        init_max_length: the largest S or I packet accepted, when larger than
+            ``max_length`` (0, the default: ``max_length``): an init may carry
+            early data before any length is negotiated (PROTOCOL.md section 13).
         error_fallback: also accept an E packet with a type-1 check while a
             stronger one is in force, as Kermit receivers do (a classic peer
             may send its error that way).  The price: a one-bit error that
@@ -201,9 +205,11 @@ class PacketParser:
         max_length: int = DEFAULT_MAX_PACKET_LENGTH,
         check: BlockCheck = BlockCheck.CRC16,
         init_check: BlockCheck = BlockCheck.SUM6,
+        init_max_length: int = 0,
         error_fallback: bool = True,
     ) -> None:
         self.max_length = max_length
+        self.init_max_length = init_max_length
         self.check = check
         self.init_check = init_check
         self.error_fallback = error_fallback
@@ -267,7 +273,10 @@ class PacketParser:
             if 35 <= ln <= 126:
                 total: int | None = ln - 30
                 if ln - 30 > self._max_length:
-                    return self._reject(RejectReason.TOO_LONG, 1)
+                    if n - pos < 4:
+                        return None  # the type decides the limit: wait for it
+                    if ln - 30 > self._limit(buf[pos + 3]):
+                        return self._reject(RejectReason.TOO_LONG, 1)
             else:
                 frame = self._extended_length()
                 if isinstance(frame, PacketRejected):
@@ -400,9 +409,15 @@ class PacketParser:
         ):
             return self._reject(RejectReason.BAD_HEADER, 1)
         total = EXTENDED_HEADER_LENGTH + (lenx1 - 32) * 95 + (lenx2 - 32)
-        if total > self._max_length:
+        if total > self._limit(buf[pos + 3]):
             return self._reject(RejectReason.TOO_LONG, 1)
         return total
+
+    def _limit(self, type_byte: int) -> int:
+        """The longest packet of this type accepted."""
+        if chr(type_byte) in _INIT_TYPES:
+            return max(self._max_length, self.init_max_length)
+        return self._max_length
 
     def _finish(self, total: int) -> ParserEvent:
         buf, pos = self._buf, self._pos

@@ -154,6 +154,15 @@ class Receiver:
         arrival.delivered = len(data)
         return len(data)
 
+    def deliver(self, data: bytes) -> None:
+        """Make bytes that came outside any data packet readable, ahead of
+        everything that follows (early data, PROTOCOL.md section 13)."""
+        if self.discard:
+            self.discarded_total += len(data)
+            return
+        self.readable += data
+        self.delivered_total += len(data)
+
     def gap_to_nak(self, now: float, nak_after: float, upto: int | None = None) -> int | None:
         """The oldest missing packet not NAKed lately (mod 64), or None.
 

@@ -478,19 +478,32 @@ async def connect(
     config: EndpointConfig | None = None,
     *,
     nursery: trio.Nursery | None = None,
+    early_data: bytes | bytearray | memoryview = b"",
 ) -> SerialSocket:
     """Connect over ``port`` and return the socket (the port now belongs to it).
 
     The driver runs in ``nursery`` when given, else as a trio system task (it
     stops when the socket is closed).
 
+    ``early_data``: bytes to send first, queued before the connection
+    request goes out: the first ``config.early_data`` of them (256 by
+    default) ride in it and reach a telelink listener one one-way delay after
+    this call, instead of after the handshake's round trip
+    (serialsocket/PROTOCOL.md section 13); the rest, or all of them if the
+    listener does not take early data, follow as ordinary data.  Delivered
+    exactly once and before anything sent later.
+
+
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
         TimeoutError: no answer within the connect timeout.
         trio.BrokenResourceError: the port failed while connecting.
+        ValueError: ``early_data`` is larger than the send buffer.
     """
     cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
+    _check_early(early_data, cfg)
     driver = await _start_driver(port, cfg, nursery)
+    driver.ep.send(early_data, driver.now())
     driver.ep.connect(driver.now())
     driver.notify()
     try:
@@ -537,6 +550,16 @@ async def accept(
         raise
 
 
+def _check_early(data: bytes | bytearray | memoryview, cfg: EndpointConfig) -> None:
+    """Refuse early data the send buffer cannot hold before connecting."""
+    room = cfg.derived_send_buffer()
+    if len(data) > room:
+        raise ValueError(
+            f"early_data is {len(data)} bytes, the send buffer holds {room}: "
+            "pass the first bytes as early_data and send the rest once connected"
+        )
+
+
 def _connect_error(driver: _Driver) -> Exception:
     if isinstance(driver.broken, PeerAborted):
         return ConnectionRefusedError(f"connection refused: {driver.broken.reason}")
@@ -548,11 +571,15 @@ def _connect_error(driver: _Driver) -> Exception:
 
 @asynccontextmanager
 async def open_serial_socket(
-    port: trio.abc.Stream, config: EndpointConfig | None = None
+    port: trio.abc.Stream,
+    config: EndpointConfig | None = None,
+    *,
+    early_data: bytes | bytearray | memoryview = b"",
 ) -> AsyncIterator[SerialSocket]:
-    """``async with open_serial_socket(port) as sock:`` -- connect, use, close."""
+    """``async with open_serial_socket(port) as sock:`` -- connect, use, close
+    (``early_data`` as for :func:`connect`)."""
     async with trio.open_nursery() as nursery:
-        sock = await connect(port, config, nursery=nursery)
+        sock = await connect(port, config, nursery=nursery, early_data=early_data)
         try:
             yield sock
         finally:

@@ -568,24 +568,44 @@ def _connect_error(d: AsyncioDriver) -> Exception:
 
 
 async def connect(
-    port: PortLike, config: EndpointConfig | None = None, *, baud: int = 9600
+    port: PortLike,
+    config: EndpointConfig | None = None,
+    *,
+    baud: int = 9600,
+    early_data: bytes | bytearray | memoryview = b"",
 ) -> AsyncioSerialSocket:
     """Connect over ``port`` and return the socket (the port now belongs to it).
 
     ``port``: an :class:`AsyncioSerialPort` (or any :class:`AsyncPort`), or a
     device path / pyserial URL opened at ``baud``.
 
+    ``early_data``: bytes to send first, queued before the connection
+    request goes out: the first ``config.early_data`` of them (256 by
+    default) ride in it and reach a telelink listener one one-way delay after
+    this call, instead of after the handshake's round trip
+    (serialsocket/PROTOCOL.md section 13); the rest, or all of them if the
+    listener does not take early data, follow as ordinary data.  Delivered
+    exactly once and before anything sent later.
+
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
         TimeoutError: no answer within the connect timeout.
         ConnectionError: the port failed while connecting.
         OSError: a path or URL could not be opened.
+        ValueError: ``early_data`` is larger than the send buffer.
     """
+    room = (config or EndpointConfig()).derived_send_buffer()
+    if len(early_data) > room:
+        raise ValueError(
+            f"early_data is {len(early_data)} bytes, the send buffer holds {room}: "
+            "pass the first bytes as early_data and send the rest once connected"
+        )
     line, _ = await _port(port, baud)
     cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=True)
     try:
         d.start()
+        d.ep.send(early_data, d.now())
         d.ep.connect(d.now())
         d.notify()
         while True:

@@ -153,7 +153,7 @@ def run_transfer(
         byte_error_rate=byte_error_rate,
         burst=ge,
     )
-    goodput = m.delivered / m.seconds if m.seconds > 0 else 0.0
+    goodput = m.goodput
     return GoodputResult(
         window=window,
         max_len=max_len,

@@ -524,7 +524,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         time_cap=cap,
         hints=point.hints,
     )
-    goodput = m.delivered / m.seconds if m.seconds > 0 else 0.0
+    goodput = m.goodput
     efficiency = goodput / line_bps
     limit_eff = limit / line_bps
     return {
@@ -558,6 +558,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         if m.first_byte_seconds is None
         else round(m.first_byte_seconds, 3),
         "long_sequence": m.long_sequence,
+        "early_bytes": m.early_bytes,
         "mean_byte_error_rate": mean_byte_error_rate(point.ber, burst),
         "packet_error_rate": round(p_hit, 6),
         "limit_Bps": round(limit, 3),

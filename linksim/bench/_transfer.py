@@ -113,7 +113,16 @@ class Measurement:
     smoothed_rtt: float | None
     effective_window: int
     first_byte_seconds: float | None = None
+    early_bytes: int = 0
+    """Of ``delivered``, bytes that came in the connection request (before
+    ``seconds`` began): left out of the goodput (:attr:`goodput`)."""
     long_sequence: bool = False
+
+    @property
+    def goodput(self) -> float:
+        """Payload bytes/s after the connection was established (early data,
+        which arrived during the handshake, is not counted)."""
+        return (self.delivered - self.early_bytes) / self.seconds if self.seconds > 0 else 0.0
 
 
 @functools.lru_cache(maxsize=64)
@@ -285,9 +294,11 @@ def simulate(
     ba = LinkDirection(link.b_to_a, seed=link.seed, direction=1)
     now = 0.0
     b.listen()
+    # Queued before connecting, as a command is: the first bytes ride in the
+    # connection request (serialsocket/PROTOCOL.md section 13).
+    pos = a.send(payload, now)
     a.connect(now)
     got = bytearray()
-    pos = 0
     start: float | None = None
     # Read the line as a serial reader does, in small batches (16 character
     # times), but never past a timer that is due first: the batching keeps
@@ -301,7 +312,7 @@ def simulate(
         if start is None and a.state is State.ESTABLISHED:
             start = now
             cap_at = now + time_cap
-        if a.state is State.ESTABLISHED and pos < size:
+        if a.state in (State.CONNECTING, State.ESTABLISHED) and pos < size:
             pos += a.send(memoryview(payload)[pos:], now)
         ab.send(a.data_to_send(now), now)
         ba.send(b.data_to_send(now), now)
@@ -353,4 +364,5 @@ def simulate(
         effective_window=s.effective_window,
         first_byte_seconds=first_byte,
         long_sequence=s.long_sequence,
+        early_bytes=b.statistics().early_received,
     )

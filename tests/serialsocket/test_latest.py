@@ -96,21 +96,22 @@ def test_either_side_off_means_no_lane_and_sending_says_so(off: str, setting: st
 
 
 def test_the_offer_is_one_xlanes_character_and_off_keeps_todays_init() -> None:
-    on = Endpoint(EndpointConfig(long_window=None))._mine.encode()
-    off = Endpoint(EndpointConfig(long_window=None, latest=False))._mine.encode()
+    # (early_data=0: early data's bit is the other XLANES offer, PROTOCOL.md 13.)
+    on = Endpoint(EndpointConfig(long_window=None, early_data=0))._mine.encode()
+    off = Endpoint(EndpointConfig(long_window=None, latest=False, early_data=0))._mine.encode()
     assert on == off + b"!"  # tochar(1): XLANES after XCAPAS
     assert InitParameters.decode(on).lanes == LANE_LATEST
     assert InitParameters.decode(off).lanes is None
     # With long sequence numbers XLANES follows XWINDO's three characters.
     long_on = Endpoint(EndpointConfig())._mine.encode()
-    assert InitParameters.decode(long_on).lanes == LANE_LATEST
+    assert (InitParameters.decode(long_on).lanes or 0) & LANE_LATEST
     assert InitParameters.decode(long_on).long_window is not None
 
 
 def test_an_older_telelink_that_sends_no_xlanes_gets_no_lane() -> None:
     mine = Endpoint(EndpointConfig(long_window=None))._mine
     older = InitParameters.decode(
-        Endpoint(EndpointConfig(long_window=None, latest=False))._mine.encode()
+        Endpoint(EndpointConfig(long_window=None, latest=False, early_data=0))._mine.encode()
     )
     assert not negotiate(mine, older).latest
     assert mine.answer(older, None).lanes is None  # the answer carries no XLANES either
