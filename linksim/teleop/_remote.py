@@ -295,17 +295,26 @@ class RemoteArm:
                 return
         if self.status is ReplyStatus.DEADMAN:
             self.status = ReplyStatus.FOLLOWING
-        if not engaged:
-            self.flags |= ContactFlags.CLUTCHED
-            self.reference = words.copy() if s.mode is not TeleopMode.RATE else self.reference
-            self.rate = np.zeros(6)
-            return
         if s.mode is TeleopMode.RATE:
+            if not engaged:
+                self.flags |= ContactFlags.CLUTCHED
+                self.rate = np.zeros(6)
+                return
             dead = np.where(np.abs(words) < cfg.rate_deadband, 0.0, words)
             self.rate = cfg.rate_gain * self._to_robot(dead, now, tool=False)
             return
+        # The words are sums of what the hand did while ENGAGED (tcpstream
+        # PROTOCOL.md 14): the difference from the last sample applied is
+        # motion to make even when this sample is clutched -- the hand moved
+        # before the release, in samples this arm never saw.  (Resetting the
+        # reference on a clutched sample lost that motion: a joint-mode
+        # surface run that never reached the table, seed 3.)  While clutched
+        # the sums do not change, so the arm holds.
         delta = words - self.reference
         self.reference = words.copy()
+        if not engaged:
+            self.flags |= ContactFlags.CLUTCHED
+            self.rate = np.zeros(6)
         if s.mode is TeleopMode.JOINT:
             self.q_target = self.q_target + np.array(cfg.joint_scale) * delta
             self.q_target = np.clip(self.q_target, self.model.lower_array, self.model.upper_array)

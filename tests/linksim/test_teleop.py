@@ -148,21 +148,45 @@ def test_joint_mode_moves_joints_by_the_scaled_increments() -> None:
 def test_index_clutch_holds_the_arm_and_motion_resumes_from_the_new_words() -> None:
     a = arm()
     p0 = a.p.copy()
+    # The sender sums only while ENGAGED (tcpstream PROTOCOL.md 14): the
+    # handle's travel with the clutch open never reaches the words.
     seq = [
         Sample(1, TeleopMode.INDEX, E, 0, 0.0, six(0.01)),
         Sample(2, TeleopMode.INDEX, Buttons(0), 0, 0.0, six(0.01)),
-        Sample(3, TeleopMode.INDEX, Buttons(0), 0, 0.0, six(0.03)),  # would be +20 mm
-        Sample(4, TeleopMode.INDEX, E, 0, 0.0, six(0.03)),
-        Sample(5, TeleopMode.INDEX, E, 0, 0.0, six(0.04)),
+        Sample(3, TeleopMode.INDEX, Buttons(0), 0, 0.0, six(0.01)),
+        Sample(4, TeleopMode.INDEX, E, 0, 0.0, six(0.01)),
+        Sample(5, TeleopMode.INDEX, E, 0, 0.0, six(0.02)),
     ]
     now = 0.0
     for s in seq[:3]:
         now += DT
         reply = a.step(now, (s, now))
     assert reply.flags & ContactFlags.CLUTCHED
-    run(a, seq[3:], 200, now)
-    # 10 mm before the clutch, 10 mm after it; the 20 mm made with it open do not count.
+    held = a.p_cmd.copy()
+    run(a, [seq[2]] * 20, 20, now)
+    np.testing.assert_allclose(a.p_cmd, held, atol=1e-12)  # clutched: the arm holds
+    run(a, seq[3:], 200, now + 20 * DT)
+    # 10 mm before the clutch, 10 mm after it.
     np.testing.assert_allclose(a.p - p0, [0.02, 0, 0], atol=1e-4)
+
+
+def test_motion_made_before_the_clutch_in_unseen_samples_is_not_lost() -> None:
+    # Sample 2 (engaged, the hand moved on to 30 mm) never reached the arm; the
+    # first one it sees after is already clutched.  Its words still carry the
+    # motion (the last found a joint-mode run that never reached the table).
+    for mode in (TeleopMode.INDEX, TeleopMode.JOINT):
+        a = arm()
+        p0, q0 = a.p.copy(), a.q.copy()
+        seq = [
+            Sample(1, mode, E, 0, 0.0, six(0.0)),
+            Sample(3, mode, Buttons(0), 0, 0.0, six(0.03)),
+            Sample(4, mode, E, 0, 0.0, six(0.03)),
+        ]
+        run(a, seq, 300)
+        if mode is TeleopMode.INDEX:
+            np.testing.assert_allclose(a.p - p0, [0.03, 0, 0], atol=1e-4)
+        else:
+            np.testing.assert_allclose(a.q - q0, [0.03, 0, 0, 0, 0, 0], atol=1e-6)
 
 
 def test_rate_mode_moves_and_its_deadman_stops_it() -> None:
