@@ -74,9 +74,7 @@ def test_json_rows_have_the_issue_keys_and_are_consistent() -> None:
         assert r["line_Bps"] == 960.0
         # Early data (in the connection request) came before ``seconds`` began.
         assert 0 <= r["early_bytes"] <= 256
-        assert r["goodput_Bps"] == pytest.approx(
-            (2500 - r["early_bytes"]) / r["seconds"], rel=1e-3
-        )
+        assert r["goodput_Bps"] == pytest.approx((2500 - r["early_bytes"]) / r["seconds"], rel=1e-3)
         assert r["efficiency"] == pytest.approx(r["goodput_Bps"] / 960.0, abs=1e-4)
         assert r["ratio_to_limit"] == pytest.approx(
             r["efficiency"] / r["limit_efficiency"], abs=1e-3
