@@ -25,7 +25,12 @@ Hypothesis then interleaves application calls, time, and impairments:
 
 The line never *reorders*: every impairment keeps arrival times
 non-decreasing along the FIFO.  A duplicate is inserted directly after its
-original, which is exactly what a retransmission looks like on the wire.
+original, which is exactly what a retransmission looks like on the wire.  It
+arrives with its original and takes no line time: a copy made beyond the slow
+line (a relay repeating a packet on a fast hop).  The peer answers every copy,
+so a burst of them backs its line up with ACKs that then come back to back --
+bunched ACKs, which a stalled receiver makes too, and which the rate estimator
+must not take for a faster line (tests/serialsocket/test_rate_duplicates.py).
 Replaying a stale copy much later is deliberately outside the model: with
 sequence numbers mod 64 and windows up to 31, a packet replayed after the
 receiver moved on by more than 32 packets is indistinguishable from a new one

@@ -1770,6 +1770,20 @@ class Endpoint:
             self._rtt.on_timeout()
             if self._rate.on_timeout():
                 self._rate_changed()
+                # The raise built a queue the model did not see: time the
+                # packets still in it from when they will leave at the rate
+                # now in use, as a busy run's lowering does, and resend only
+                # those whose timer still runs out.  (Resent as well, they
+                # joined that queue: 20 KB over a 300 bit/s line whose rate
+                # had been taken for six times its own took 3145 s, not 1334.)
+                last = self._rate.last_delivery
+                if last is not None:
+                    free_at = self._rate.line_free_at(*last)
+                    if free_at is not None and self._pacer.catch_up(free_at):
+                        self._rate.pushed()
+                    self._rearm_queued(*last)
+                    outstanding = self._sender.outstanding
+                    expired = [q for q in expired if (outstanding[q].deadline or now) <= now]
             limit = self.config.max_retries
             for seq in expired:
                 pkt = self._sender.outstanding[seq]

@@ -16,7 +16,13 @@ Delivery rate
     between the two ACKs: the path's delay is in both and cancels.  If the
     line idled in between, the sample is below its rate, never above it
     (apart from jitter, which an interval of about a round trip averages
-    out), so the estimate is the largest recent sample.
+    out), so the estimate is the largest recent sample.  Unless the first
+    ACK waited at the far end -- behind the peer's other ACKs, or in a
+    receiver that stalled and then read a burst: the ACKs then come back to
+    back, spaced by the peer's line, and their interval is short by the
+    wait.  The bytes were handed to our line over the time between the two
+    packets' handing, too, and a sample may show the line only a little
+    faster than that (:data:`SEND_SLACK`).
 
 Queue lag
     A packet's round trip is measured from when the pacer's model says it
@@ -38,7 +44,11 @@ How the estimate moves (:meth:`RateEstimator.on_delivery`):
   slow and the pacer holds back what the line could carry);
 * down to the measured rate only while the queue proves the line busy at
   both ends of the sample's interval (an idle application or a shut window
-  also makes samples low, and must not slow the pacer).
+  also makes samples low, and must not slow the pacer);
+* back down to where it was when a retransmission timer fires after a raise
+  that no later busy run has confirmed (:meth:`RateEstimator.on_timeout`):
+  bunched ACKs can fake a sample or a busy run, and once every packet is
+  resent before its ACK nothing else would ever measure the line again.
 
 The peer's ACKs share its line with its own data: an ACK that waited behind
 a reply packet arrives late, the next one early, and the round trip grows
@@ -87,6 +97,13 @@ LOOSE_SEED_DELIVERIES = 4
 """Deliveries (with the way back quiet) that tighten a listener's seeded
 reference round trip before :meth:`RateEstimator.fast_evidence` uses it."""
 
+SEND_SLACK = 1.1
+"""A delivery sample may show the line this much faster than its bytes were
+handed over, and no more: a queue draining does that (a pacer whose rate was
+measured a few per cent low); ACKs that waited at the far end and came back
+bunched show the peer's ACK clock, not our line (up to the ratio of a data
+packet to an ACK, 2.4 times a 300 bit/s line with 39-character packets)."""
+
 MAX_FILTER_ROUND_TRIPS = 10
 """Samples older than this many round trips leave the windowed maximum."""
 
@@ -100,6 +117,7 @@ class RateMark:
         point_time: when the delivery point was reached (an ACK's arrival).
         point_handed: ``handed_end`` of the packet acknowledged at that point.
         point_queued: that packet had waited in a queue (the line was busy).
+        point_sent: when that packet (its first copy) was handed to the line.
         sent_at: when this packet was handed to the line.
         epoch: the estimate's version when this packet was sent.
     """
@@ -108,6 +126,7 @@ class RateMark:
     point_time: float
     point_handed: int
     point_queued: bool
+    point_sent: float
     sent_at: float
     epoch: int
 
@@ -135,7 +154,9 @@ class RateEstimator:
         without queueing: the least seen, from the init exchange on."""
         self.init_rtt: float | None = None
         """The init exchange's round trip, measured from the init being
-        handed to the line: the one sample no rate model touched."""
+        handed to the line: the one sample no rate model touched.  Tightened
+        by any packet's time from handing to ACK, which no model touches
+        either (:meth:`on_delivery`)."""
         self.busy_change = False
         """The last :meth:`on_delivery` set the rate from a busy line (exact)."""
         self.samples = 0
@@ -145,18 +166,28 @@ class RateEstimator:
         self._point_time: float | None = None
         self._point_handed = 0
         self._point_queued = False
+        self._point_sent = 0.0
         self._max: deque[tuple[float, float]] = deque()
         self._epoch = 0
         self._offset_epoch = -1
         self._pushed = False
-        self._ramped_from: float | None = None
-        """The rate before the first ramp not yet confirmed by a busy run."""
+        self._raised_from: float | None = None
+        """The rate before the first raise no busy run has confirmed since: a
+        ramp on early ACKs, a sample above the rate, or a busy run faster
+        than it (ACKs bunched at the far end can fake the last two)."""
+        self._raised_at = -math.inf
+        """When :attr:`_raised_from` was set: only a busy run that starts
+        after it confirms the raise (the run that raised is no witness)."""
         self.pull_back = 0.0
         """Seconds the pacer's model should move earlier (set by :meth:`on_delivery`)."""
         self._init_bytes = 0
         self._last_queued = False
-        self._run: tuple[float, int, int] | None = None
+        self._run: tuple[float, int, int, float] | None = None
+        """A queued run: its first delivery's time, that packet's
+        ``handed_end``, deliveries since, and when that packet was handed over."""
         self._reverse_at = -math.inf
+        self.last_delivery: tuple[float, RateMark] | None = None
+        """When the last first copy was acknowledged, and its mark."""
         self._loose = 0
         """Deliveries left before a seeded :attr:`init_rtt` is trusted as the
         reference of :meth:`fast_evidence` (0: trusted; -1: never)."""
@@ -173,6 +204,9 @@ class RateEstimator:
         self._point_time = now
         self._point_handed = self._handed
         self._point_queued = False
+        # The packet delivered at this point is the init, handed one round
+        # trip ago (or, unmeasured, no earlier than now for all we know).
+        self._point_sent = now - (base_rtt or 0.0)
         self._init_bytes = self._handed
         if base_rtt is not None:
             self.base_rtt = self.init_rtt = base_rtt
@@ -216,6 +250,7 @@ class RateEstimator:
             point_time=self._point_time,
             point_handed=self._point_handed,
             point_queued=self._point_queued,
+            point_sent=self._point_sent,
             sent_at=now,
             epoch=self._epoch,
         )
@@ -261,16 +296,17 @@ class RateEstimator:
     def fast_evidence(self, rtt: float, model_tx: float, rttvar: float) -> bool:
         """A round trip this short means the packet left before the model said.
 
-        The init exchange's round trip is the reference: it was measured
-        from the moment the init was handed to the line, so no model is in
-        it, and it includes two init packets' transmit times that a data
-        packet's ACK does not pay.  A paced packet's modelled departure is up
-        to three of its transmit times after it was handed over (two packets
-        queued ahead of it in the model); on a line k times faster than the
-        model it really left after one real transmit time, so its round trip
-        comes out about (3k - 1) real transmit times short -- more than the
-        one modelled transmit time allowed here for every k above about 1.2,
-        and never for k = 1.
+        The init exchange's round trip is the reference (or a packet's, from
+        handing to ACK, if shorter): it was measured from the moment the init
+        was handed to the line, so no model is in it, and it includes two
+        init packets' transmit times that a data packet's ACK does not pay.
+        A paced packet's modelled departure is up to three of its transmit
+        times after it was handed over (two packets queued ahead of it in
+        the model); on a line k times faster than the model it really left
+        after one real transmit time, so its round trip comes out about
+        (3k - 1) real transmit times short -- more than the one modelled
+        transmit time allowed here for every k above about 1.2, and never
+        for k = 1.
 
         Args:
             rtt: the sample, from the model's departure time to the ACK.
@@ -306,6 +342,7 @@ class RateEstimator:
         changed = False
         queued = False
         self.busy_change = False
+        self.last_delivery = (now, mark)
         if not fast and (self.base_rtt is None or rtt < self.base_rtt) and self.plausible(rtt):
             self.base_rtt = rtt
         # The peer's data crossed the interval: its ACKs were timed by its line.
@@ -329,29 +366,48 @@ class RateEstimator:
             self.queue_delay = lag if queued and self._last_queued else 0.0
             self._last_queued = queued
         busy = None if tainted else self._busy_sample(mark, now, queued)
-        interval = now - mark.point_time
+        # The bytes between the two delivery points were handed over in the
+        # time between their packets' handing, and left the line in the time
+        # between their ACKs -- unless the ACKs were bunched: an ACK that
+        # waited at the far end (behind the peer's other ACKs, or its
+        # receiver stalled and then read a burst) makes the next interval
+        # short by the wait.  ACKs for 39-character packets sent back to back
+        # at 16 characters each "measured" a 300 bit/s line at 1170 bit/s,
+        # and pacing at that flooded it.  The line cannot carry bytes before
+        # they are handed to it, so a sample shows at most SEND_SLACK times
+        # the rate they were handed at.  (BBR's delivery-rate estimation
+        # takes the longer interval outright; here a pacer whose rate was
+        # measured 4 % low then never learned better.)
+        interval = max(now - mark.point_time, (mark.sent_at - mark.point_sent) / SEND_SLACK)
         if not tainted and mark.handed_end > mark.point_handed and interval > 0:
             sample = (mark.handed_end - mark.point_handed) / interval
             self.samples += 1
             self._push(sample, now, srtt)
             measured = self._max[0][1]
             self.measured = measured
+            if busy is not None and self._confirms(busy, now):
+                self._raised_from = None  # a measurement, not a guess, from here
             if busy is not None and (
                 self.rate is None or abs(busy - self.rate) > BUSY_REFINE * self.rate
             ):
                 # The line was busy all along: this is its rate, up or down
                 # (refined as the run grows: a rate 1 % low misplaces the end
                 # of a minute of queue by 0.6 s).
-                if self.rate is not None:
-                    if busy > self.rate * RAISE_MARGIN:
-                        self.raises += 1
-                    elif busy < self.rate * LOWER_MARGIN:
-                        self.lowers += 1
+                if self.rate is not None and busy > self.rate * RAISE_MARGIN:
+                    # Faster than the rate in use while a queue waits: the
+                    # line, or ACKs that waited at the far end and came back
+                    # to back (a stalled receiver read a burst and answered
+                    # it: a 300 bit/s line "measured" at 1770 bit/s, and the
+                    # pacer flooded it).  A raise, until a later run confirms it.
+                    self.raises += 1
+                    self._raising(now)
+                elif self.rate is not None and busy < self.rate * LOWER_MARGIN:
+                    self.lowers += 1
                 self.rate = busy
                 self.busy_change = True
-                self._ramped_from = None  # a measurement, not a guess, from here
                 changed = True
             elif self.rate is not None and measured > self.rate * RAISE_MARGIN:
+                self._raising(now)
                 self.rate = measured
                 self.raises += 1
                 changed = True
@@ -386,8 +442,7 @@ class RateEstimator:
                 ceiling = max(self.rate, RAMP_MAX * (self.measured or 0.0))
                 ramped = min(self.rate * self._ramp(mark, now, wire_bytes), ceiling)
                 if ramped > self.rate:
-                    if self._ramped_from is None:
-                        self._ramped_from = self.rate
+                    self._raising(now)
                     self.rate = ramped
                     self.raises += 1
                     changed = True
@@ -395,9 +450,34 @@ class RateEstimator:
             self._point_time = now
             self._point_handed = mark.handed_end
             self._point_queued = queued
+            self._point_sent = mark.sent_at
+        if self.init_rtt is not None and now - mark.sent_at < self.init_rtt:
+            # From handing a packet over to its ACK, like the init exchange,
+            # with no model in it: the path is no longer than that.  An init
+            # answer that was held up (60 s, on a 115 200 bit/s line) made
+            # every later round trip "impossible" -- all early, none a
+            # sample: the base round trip stayed 60 s, no queue could show,
+            # and the rate ramped to four times the line for good.
+            self.init_rtt = now - mark.sent_at
         if changed:
             self._epoch += 1
         return changed
+
+    def _raising(self, now: float) -> None:
+        """The rate is about to be raised at ``now``: remember where from,
+        unless an earlier raise is still unconfirmed."""
+        if self._raised_from is None:
+            self._raised_from = self.rate
+            self._raised_at = now
+
+    def _confirms(self, busy: float, now: float) -> bool:
+        """A busy run measured ``busy``: does it confirm the rate in use?  Any
+        measurement at or below it does; one that raises it does not, nor
+        does the run that made the raise (it is no witness of itself)."""
+        if self.rate is None or busy > self.rate * RAISE_MARGIN:
+            return False
+        started = self._run[0] if self._run is not None else now
+        return busy < self.rate * LOWER_MARGIN or started >= self._raised_at
 
     def _busy_sample(self, mark: RateMark, now: float, queued: bool) -> float | None:
         """The line's rate over a run of deliveries that all waited in a queue.
@@ -414,16 +494,24 @@ class RateEstimator:
         if self._run is not None and self._reverse_at > self._run[0]:
             self._run = None  # the peer's data arrived within the run: start again
         if self._run is None:
-            self._run = (now, mark.handed_end, 0)
+            self._run = (now, mark.handed_end, 0, mark.sent_at)
             return None
-        t0, h0, n = self._run
+        t0, h0, n, s0 = self._run
         n += 1
-        self._run = (t0, h0, n)
+        self._run = (t0, h0, n, s0)
         if mark.handed_end <= h0 or now <= t0:
             return None
         if n < BUSY_RUN_PACKETS and now - t0 < BUSY_RUN_SPAN:
             return None
-        return (mark.handed_end - h0) / (now - t0)
+        busy = (mark.handed_end - h0) / (now - t0)
+        span = (mark.sent_at - s0) / SEND_SLACK
+        if self.rate is not None and busy > self.rate and span > now - t0:
+            # A raise, but no faster than the bytes were handed over either
+            # (ACKs bunched at the far end: see on_delivery).  Only a raise:
+            # bytes handed in a burst long before drain at the line's rate,
+            # and their handing says nothing of it.
+            busy = max(self.rate, (mark.handed_end - h0) / span)
+        return busy
 
     def _push(self, sample: float, now: float, srtt: float | None) -> None:
         horizon = MAX_FILTER_ROUND_TRIPS * (srtt or 0.0)
@@ -452,20 +540,24 @@ class RateEstimator:
         return min(max(wire_bytes / tx / self.rate, RAMP_MIN), RAMP_MAX)
 
     def on_timeout(self) -> bool:
-        """A retransmission timer fired.  If the rate was ramped on early ACKs
-        alone and no busy run has confirmed it since, the ramp is the likelier
-        culprit than the line: the model drains faster than the line, and the
-        queue it does not see delays every ACK past its timer.  (With the
-        peer's data on the way back -- an arm's telemetry -- that queue never
-        shows as queue lag, so nothing else corrects it: at 9600 bit/s and no
-        delay a rate ramped to twice the line stayed there, every timer fired,
-        and the duplicates starved the session for its dead time.)  Back to
-        the larger of the rate before the ramp and what was measured; returns
-        whether the rate changed."""
-        if self._ramped_from is None or self.rate is None:
+        """A retransmission timer fired.  If the rate was raised -- ramped on
+        early ACKs, or set by a sample or a busy run faster than it -- and no
+        busy run has confirmed it since, the raise is the likelier culprit
+        than the line: the model drains faster than the line, and the queue
+        it does not see delays every ACK past its timer.  (With the peer's
+        data on the way back -- an arm's telemetry -- that queue never shows
+        as queue lag, so nothing else corrects it: at 9600 bit/s and no delay
+        a rate ramped to twice the line stayed there, every timer fired, and
+        the duplicates starved the session for its dead time.  And once every
+        packet is resent before its ACK, none gives a sample: a 300 bit/s
+        line whose ACKs came back bunched after a stall was paced at six
+        times its rate, and the timeouts never stopped.)  Back to the larger
+        of the rate before the raise and what was measured; returns whether
+        the rate changed."""
+        if self._raised_from is None or self.rate is None:
             return False
-        back = max(self._ramped_from, min(self.measured or 0.0, self.rate))
-        self._ramped_from = None
+        back = max(self._raised_from, min(self.measured or 0.0, self.rate))
+        self._raised_from = None
         if back >= self.rate:
             return False
         self.rate = back
