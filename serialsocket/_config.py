@@ -435,6 +435,20 @@ class EndpointConfig:
         line was seen (a sans-I/O endpoint: printable is safe on any line)."""
         return PRINTABLE if self.encoding is None else self.encoding
 
+    def check_early_data(self, data: bytes | bytearray | memoryview) -> None:
+        """Refuse bytes to send before connecting that the send buffer cannot
+        hold (the sockets' ``early_data``).
+
+        Raises:
+            ValueError: with what to do instead.
+        """
+        room = self.derived_send_buffer()
+        if len(data) > room:
+            raise ValueError(
+                f"early_data is {len(data)} bytes, the send buffer holds {room}: "
+                "pass the first bytes as early_data and send the rest once connected"
+            )
+
     def for_line(self, port: object) -> EndpointConfig:
         """This configuration with ``encoding`` chosen from ``port`` if None:
         the port's ``encoding`` attribute (a :class:`SerialPort` from

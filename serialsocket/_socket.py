@@ -486,13 +486,12 @@ async def connect(
     stops when the socket is closed).
 
     ``early_data``: bytes to send first, queued before the connection
-    request goes out: the first ``config.early_data`` of them (256 by
-    default) ride in it and reach a telelink listener one one-way delay after
-    this call, instead of after the handshake's round trip
-    (serialsocket/PROTOCOL.md section 13); the rest, or all of them if the
+    request goes out: the first of them (at most ``config.early_data``, and
+    the init's own bound: serialsocket/PROTOCOL.md section 13) ride in it and
+    reach a telelink listener one one-way delay after this call instead of
+    after the handshake's round trip; the rest, or all of them if the
     listener does not take early data, follow as ordinary data.  Delivered
     exactly once and before anything sent later.
-
 
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
@@ -501,7 +500,7 @@ async def connect(
         ValueError: ``early_data`` is larger than the send buffer.
     """
     cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
-    _check_early(early_data, cfg)
+    cfg.check_early_data(early_data)
     driver = await _start_driver(port, cfg, nursery)
     driver.ep.send(early_data, driver.now())
     driver.ep.connect(driver.now())
@@ -548,16 +547,6 @@ async def accept(
     except BaseException:
         await driver.stop()
         raise
-
-
-def _check_early(data: bytes | bytearray | memoryview, cfg: EndpointConfig) -> None:
-    """Refuse early data the send buffer cannot hold before connecting."""
-    room = cfg.derived_send_buffer()
-    if len(data) > room:
-        raise ValueError(
-            f"early_data is {len(data)} bytes, the send buffer holds {room}: "
-            "pass the first bytes as early_data and send the rest once connected"
-        )
 
 
 def _connect_error(driver: _Driver) -> Exception:

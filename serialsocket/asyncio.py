@@ -580,13 +580,12 @@ async def connect(
     device path / pyserial URL opened at ``baud``.
 
     ``early_data``: bytes to send first, queued before the connection
-    request goes out: the first ``config.early_data`` of them (256 by
-    default) ride in it and reach a telelink listener one one-way delay after
-    this call, instead of after the handshake's round trip
-    (serialsocket/PROTOCOL.md section 13); the rest, or all of them if the
+    request goes out: the first of them (at most ``config.early_data``, and
+    the init's own bound: serialsocket/PROTOCOL.md section 13) ride in it and
+    reach a telelink listener one one-way delay after this call instead of
+    after the handshake's round trip; the rest, or all of them if the
     listener does not take early data, follow as ordinary data.  Delivered
     exactly once and before anything sent later.
-
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
         TimeoutError: no answer within the connect timeout.
@@ -594,12 +593,7 @@ async def connect(
         OSError: a path or URL could not be opened.
         ValueError: ``early_data`` is larger than the send buffer.
     """
-    room = (config or EndpointConfig()).derived_send_buffer()
-    if len(early_data) > room:
-        raise ValueError(
-            f"early_data is {len(early_data)} bytes, the send buffer holds {room}: "
-            "pass the first bytes as early_data and send the rest once connected"
-        )
+    (config or EndpointConfig()).check_early_data(early_data)
     line, _ = await _port(port, baud)
     cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=True)

@@ -731,3 +731,24 @@ def test_the_asyncio_client_sends_its_emergency_stop_on_the_lane() -> None:
     if isinstance(outcome, BaseException):
         raise outcome
     assert seen == [1, 1]  # one stop, and it came on the lane
+
+
+def test_early_data_rides_in_the_connection_request() -> None:
+    """serialsocket/PROTOCOL.md section 13, through the asyncio connect."""
+
+    async def main() -> None:
+        line = MemoryLine()
+        server_task = asyncio.create_task(sa.accept(line.b))
+        client = await sa.connect(line.a, early_data=b"first words")
+        server = await server_task
+        client.write(b", then more")
+        await client.drain()
+        client.write_eof()
+        assert await server.read() == b"first words, then more"
+        assert client.statistics().link.early_delivered == len(b"first words")
+        assert server.statistics().link.early_received == len(b"first words")
+        await asyncio.gather(client.aclose(), server.aclose())
+        with pytest.raises(ValueError, match="early_data"):
+            await sa.connect(line.a, EndpointConfig(send_buffer=4), early_data=b"too long")
+
+    run(main)
