@@ -61,6 +61,7 @@ _NETCAT_TYPES: dict[str, object] = {
     "max_len": ENDPOINT_LENGTH,
     "delay": DELAY,
     "dead_after": SECONDS,
+    "max_packet_time": SECONDS,
 }
 """Ranges of the netcat options (_netcat.add_arguments declares them with bare int/float)."""
 

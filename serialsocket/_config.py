@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from ._checks import BlockCheck
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
+from ._length import LADDER
 from ._packet import data_capacity
 from ._params import (
     DENSE_FEATURES,
@@ -27,8 +28,10 @@ from ._params import (
 from ._wire import DEFAULT_MAX_PACKET_LENGTH, MAX_PACKET_LENGTH
 
 __all__ = [
+    "ADAPTIVE_RECEIVE_LENGTH",
     "DEFAULT_BUFFER_CAP",
     "DEFAULT_EARLY_DATA",
+    "DEFAULT_MAX_PACKET_TIME",
     "IDLE_COPY_MIN_PACKETS",
     "MAX_EARLY_DATA",
     "MAX_IDLE_COPIES",
@@ -36,6 +39,7 @@ __all__ = [
     "MIN_CONNECT_TIMEOUT",
     "MIN_ENDPOINT_PACKET_LENGTH",
     "UNHINTED_CONNECT_TIMEOUT",
+    "UNHINTED_INIT_TIMEOUT",
     "UNMEASURED_DEAD_AFTER",
     "EndpointConfig",
     "line_encoding",
@@ -60,6 +64,23 @@ DEFAULT_BUFFER_CAP = 16 * 1024 * 1024
 _DERIVED_LENGTHS = (DEFAULT_MAX_PACKET_LENGTH, 256, 512, 1024, 2048)
 """Candidate derived packet lengths: the goodput grid's (bench/results/README.md)."""
 
+ADAPTIVE_RECEIVE_LENGTH = 1024
+"""The packet length an endpoint without ``max_packet_length`` announces it
+receives: room for the sender to lengthen its packets on a clean line
+(PROTOCOL.md 4.7).  1024 keeps CRC-16 (its residual-error arithmetic,
+PROTOCOL.md 10.3, asks for CRC-32 from about 2000 characters) and a receive
+window of 64 such packets in the default 64 KiB buffer; past it the header's
+share is under 1.3 % and every further doubling gains under 0.5 %."""
+
+DEFAULT_MAX_PACKET_TIME = 0.54
+"""Seconds of line time a data packet may take by default
+(``EndpointConfig.max_packet_time``): an emergency stop on the expedited
+lane overtakes queued packets but not the one leaving the UART, so this is
+what a stop can wait behind.  A 128-character packet's time at 2400 bit/s
+(the paper's packet on its line, and every packet before the length was
+measured): 2400 bit/s keeps 128, 9600 bit/s may reach 517, 300 bit/s gets
+96."""
+
 _LONG_WINDOW_LENGTH = 512
 """The longest derived packet length when long sequence numbers may carry a
 wide window (see ``derived_max_packet_length``)."""
@@ -77,6 +98,11 @@ UNHINTED_CONNECT_TIMEOUT = 3000.0
 """Seconds the derived connect timeout is with no delay hint: 50 minutes, more
 than a round trip to Mars at its farthest (2 x 22.4 light-minutes).  Nothing
 says the peer is near; ``connect_timeout`` (``--connect-timeout``) sets less."""
+
+UNHINTED_INIT_TIMEOUT = 1.0
+"""Seconds before the first connection request is resent when neither rate nor
+delay is hinted (RFC 6298's initial retransmission timeout); each further
+resend waits twice as long."""
 
 UNMEASURED_DEAD_AFTER = 60.0
 """Seconds of silence the derived ``dead_after`` allows before any round trip
@@ -120,11 +146,25 @@ class EndpointConfig:
 
     Attributes:
         max_packet_length: largest packet this side receives, MARK through
-            CHECK.  The peer's value bounds what this side sends.  None
-            derives it (:meth:`derived_max_packet_length`): 128, the paper's
-            size, unless line rate and delay say 31 such packets cannot
-            cover the repair of a loss; then the shortest power of two that
-            can.
+            CHECK, and sends (the peer's value bounds that too).  Given, every
+            data packet is cut to it (a fixed length, as classic Kermit).
+            None (the default): the packet length is measured, not
+            configured (PROTOCOL.md 4.7).  The side announces that it
+            receives :data:`ADAPTIVE_RECEIVE_LENGTH`, starts sending at
+            :meth:`derived_max_packet_length` (128, the paper's size, unless
+            line rate and delay say 31 such packets cannot cover the repair
+            of a loss) and then cuts each data packet to the length whose
+            goodput is best at the byte error rate its own losses show: up
+            to 1024 on a clean line, about 96 at a byte error rate of 1e-3,
+            never longer than ``max_packet_time`` allows.  Statistics:
+            ``packet_length``, ``byte_error_rate``.
+        max_packet_time: with the packet length measured (no
+            ``max_packet_length``), the most seconds of line time one data
+            packet may take at the line rate in use: an urgent message
+            overtakes queued packets but waits for the one leaving the UART
+            (default :data:`DEFAULT_MAX_PACKET_TIME`: 128 characters at 2400
+            bit/s, 517 at 9600).  None: no cap (a bulk byte stream, as the
+            ``serialsocket listen/connect`` netcat sends).
         window: window in packets, 1..31 (default 31, the most the mod-64
             sequence numbers allow), with a peer that does not take long
             sequence numbers (``long_window``).  1 is the paper's
@@ -261,6 +301,7 @@ class EndpointConfig:
     expedited: bool = True
     latest: bool = True
     early_data: int = DEFAULT_EARLY_DATA
+    max_packet_time: float | None = DEFAULT_MAX_PACKET_TIME
     xon_xoff: bool = False
     one_way_delay: float = 0.0
     line_rate: float | None = None
@@ -314,6 +355,10 @@ class EndpointConfig:
             raise bad("max_retries", self.max_retries, "None (unlimited) or >= 1")
         if not 0 <= self.early_data <= MAX_EARLY_DATA:
             raise bad("early_data", self.early_data, f"0 (none)..{MAX_EARLY_DATA} bytes")
+        if self.max_packet_time is not None and not (
+            math.isfinite(self.max_packet_time) and self.max_packet_time > 0
+        ):
+            raise bad("max_packet_time", self.max_packet_time, "None (no cap) or seconds > 0")
         if not 0 <= self.idle_copies <= MAX_IDLE_COPIES:
             raise bad("idle_copies", self.idle_copies, f"0..{MAX_IDLE_COPIES}")
 
@@ -393,6 +438,33 @@ class EndpointConfig:
             if length >= longest or self._window_covers(length):
                 return length
         return _DERIVED_LENGTHS[-1]
+
+    def receive_max_packet_length(self) -> int:
+        """The longest packet this side announces it receives: ``max_packet_length``,
+        or with the length measured, :data:`ADAPTIVE_RECEIVE_LENGTH` (at least the
+        starting length, :meth:`derived_max_packet_length`)."""
+        if self.max_packet_length is not None:
+            return self.max_packet_length
+        return max(ADAPTIVE_RECEIVE_LENGTH, self.derived_max_packet_length())
+
+    def measured_length_cap(self, peer_max: int, rate: float | None) -> int:
+        """The longest data packet the measured length may reach (PROTOCOL.md
+        4.7): ``peer_max``, and with ``max_packet_time`` set and the line's
+        ``rate`` known (characters a second), the characters the line carries
+        in that time, but at least the longest normal packet (96)."""
+        if self.max_packet_time is None or rate is None or not math.isfinite(rate):
+            return peer_max
+        return min(peer_max, max(LADDER[0], int(self.max_packet_time * rate) - 1))
+
+    def packet_lengths(self, rate: float | None = None) -> tuple[int, ...]:
+        """The data packet lengths this side may send to a peer with the same
+        receive limit on a line of ``rate`` characters a second (None: not
+        known): ``max_packet_length`` alone if given, else the measured
+        length's candidates up to :meth:`measured_length_cap`."""
+        if self.max_packet_length is not None:
+            return (self.max_packet_length,)
+        top = self.measured_length_cap(self.receive_max_packet_length(), rate)
+        return (*(n for n in LADDER if n < top), top)
 
     def derived_send_buffer(self) -> int:
         """``send_buffer`` or its derived default.

@@ -40,6 +40,7 @@ from ._config import (
     _ACK_WIRE,
     IDLE_COPY_MIN_PACKETS,
     MAX_WINDOW,
+    UNHINTED_INIT_TIMEOUT,
     UNMEASURED_DEAD_AFTER,
     EndpointConfig,
 )
@@ -70,6 +71,7 @@ from ._latest import (
     LatestReceiver,
     LatestSender,
 )
+from ._length import LADDER, LengthChooser
 from ._pacer import TIME_EPSILON, Pacer
 from ._packet import Packet, build_packet, data_capacity
 from ._params import (
@@ -244,6 +246,12 @@ class EndpointStatistics:
     any, went as ordinary data)."""
     early_received: int = 0
     """Bytes of the peer's stream delivered from its connection request."""
+    packet_length: int = 0
+    """The length (MARK through CHECK) new data packets are cut to: measured
+    from the losses unless ``max_packet_length`` fixes it (PROTOCOL.md 4.7)."""
+    byte_error_rate: float | None = None
+    """Data packets lost per wire character sent, recent ones weighted most:
+    the error rate the packet length is chosen for (None: nothing sent)."""
 
 
 class Endpoint:
@@ -285,10 +293,20 @@ class Endpoint:
     _init_transmissions: int
     _answer_sent_at: float
     _answers: int
+    _answer_span: float
+    """Seconds from our first answer to the latest copy of the init heard after it."""
     _window_key: tuple[int, float | None, int, float | None] | None
     _backlog_at: float
     _window_cached: int
     _long_seq: bool
+    _adaptive: bool
+    """The data packet length is measured (no ``max_packet_length``)."""
+    _length: LengthChooser
+    _peer_length: int
+    _mean_wire: float
+    """Wire bytes of recent new data packets (a moving mean over about eight)."""
+    """The longest data packet the peer has sent us (at least our starting
+    length): what our ACKs may wait behind in its queue."""
     _buffer_capped: bool
     _tune_at: float
     _tune_taken: int
@@ -307,7 +325,11 @@ class Endpoint:
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
         cfg = self.config
-        self._max_length = cfg.derived_max_packet_length()
+        # The longest packet we receive (announced), and the length data
+        # packets start at; they are equal unless the length is measured
+        # (no max_packet_length, PROTOCOL.md 4.7).
+        self._max_length = cfg.receive_max_packet_length()
+        self._start_length = cfg.derived_max_packet_length()
         self._mine = InitParameters.mine(
             max_packet_length=self._max_length,
             window=cfg.window,
@@ -329,10 +351,10 @@ class Endpoint:
         )
         self._rate = RateEstimator(self._rate_hint())
         self._pacer = Pacer(
-            self._tx, paced=cfg.line_rate is not None, full_packet=self._max_length + 1
+            self._tx, paced=cfg.line_rate is not None, full_packet=self._start_length + 1
         )
         self._rtt = RttEstimator(
-            floor=self._timeout_floor(self._max_length, self._max_length),
+            floor=self._timeout_floor(self._start_length, self._start_length),
             ceiling=math.inf,  # set with dead_after when a connection starts (_ceiling)
             initial=cfg.initial_timeout(),
         )
@@ -854,6 +876,8 @@ class Endpoint:
             latest_superseded=self._lrecv.superseded,
             idle_copies=c["idle_copies"],
             doubled_resends=c["doubled_resends"],
+            packet_length=self._length.length,
+            byte_error_rate=self._length.byte_error_rate,
             early_sent=len(self._early or b""),
             early_delivered=c["early_delivered"],
             early_received=c["early_received"],
@@ -879,6 +903,10 @@ class Endpoint:
         self._send_check = BlockCheck.CRC16
         self._encoding = PRINTABLE
         self._capacity = 0
+        self._adaptive = cfg.max_packet_length is None
+        self._length = LengthChooser(self._start_length)
+        self._peer_length = self._start_length
+        self._mean_wire = float(self._start_length + 1)
         self._pacer.reset()
         self._rate = RateEstimator(self._rate_hint())
         self._pacer.paced = self._rate.rate is not None
@@ -889,6 +917,7 @@ class Endpoint:
         self._init_deadline = math.inf
         self._connect_deadline = math.inf
         self._linger_until = math.inf
+        self._answer_span = 0.0
         self._dead_after = self._liveness()
         self._rtt.ceiling = self._ceiling()
         self._close_deadline = math.inf
@@ -937,7 +966,16 @@ class Endpoint:
         self._init_sent_at = now
         self._init_transmissions += 1
         # The timeout covers a full packet; a longer init takes longer to send.
-        self._init_deadline = now + self._rtt.timeout() + self._init_extra_time()
+        wait = self._rtt.timeout() + self._init_extra_time()
+        cfg = self.config
+        if cfg.line_rate is None and cfg.one_way_delay == 0:
+            # Nothing says how slow the line is: resends 50 ms apart (the
+            # derived timeout) piled eight inits, 26 s of them, on a 300 bit/s
+            # line before the first answer, and the listener answered each.
+            # RFC 6298's initial 1 s, doubled per resend, costs a fast line
+            # nothing unless its first init is lost.
+            wait = max(wait, UNHINTED_INIT_TIMEOUT * 2 ** (self._init_transmissions - 1))
+        self._init_deadline = now + wait
 
     def _init_extra_time(self) -> float:
         """Seconds the early data adds to the init on the line (0 with none,
@@ -966,7 +1004,7 @@ class Endpoint:
             return b""
         take = bytes(queue[:limit])
         cfg = self.config
-        allowed = self._max_length // 2
+        allowed = self._start_length // 2
         if cfg.line_rate is not None:
             per_second = cfg.line_rate / cfg.bits_per_char
             allowed = max(allowed, int(0.005 * 2 * cfg.one_way_delay * per_second))
@@ -992,6 +1030,11 @@ class Endpoint:
             else:
                 self._answers += 1  # a second answer: the seed is only an upper bound
                 self._answer_init()  # Our answer was lost; say it again.
+                # Another copy after our answer: the round trip is longer than
+                # the time since our first answer; the silence verdict must
+                # wait for longer than that (see _liveness).
+                self._answer_span = now - self._answer_sent_at
+                self._dead_after = self._liveness()
             return
         if not allowed(st, Trigger.INIT_RECEIVED):
             return
@@ -1072,16 +1115,23 @@ class Endpoint:
         self._send_check = agreed.check
         self._parser.check = agreed.check
         self._encoding = agreed.encoding
-        self._capacity = data_capacity(agreed.send_max_length, agreed.check)
+        # The lanes' messages keep the starting length's fragments: their size
+        # limit must not move with the measured data length.
+        self._capacity = data_capacity(
+            min(agreed.send_max_length, self._start_length), agreed.check
+        )
         self._long_seq = agreed.long_seq
         self._sender.modulus = self._receiver.modulus = agreed.modulus
         self._sender.window = agreed.window
         self._sender.peer_window = agreed.window
         self._receiver.window = agreed.window
         self._size_receive_buffer()
-        self._receiver.capacity = data_capacity(agreed.receive_max_length, agreed.check)
-        self._pacer.full_packet = agreed.send_max_length + 1
-        self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
+        self._peer_length = min(self._start_length, agreed.receive_max_length)
+        self._fit_receive_window()
+        self._length = LengthChooser(min(self._start_length, agreed.send_max_length))
+        if not self._adaptive:
+            self._length.length = agreed.send_max_length
+        self._length_changed()
         self._last_heard = now
         self._init_deadline = math.inf
         self._rate.start(now, self._rtt.srtt if self._init_transmissions == 1 else None)
@@ -1307,6 +1357,10 @@ class Endpoint:
             self._rate_changed()  # the timers' one-way delay follows the path
         if measured:
             self._measured()
+        # A packet of the current length through on its only copy earns the
+        # next step up (serialsocket/_length.py); a short tail packet does not.
+        full = 0.9 * (self._length.length + 1)
+        self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
 
     def _rearm_queued(self, now: float, mark: RateMark) -> None:
         """The line is slower than the model that timed the packets in flight:
@@ -1359,8 +1413,8 @@ class Endpoint:
         # needs the queue to see the line.
         self._pacer.tight = self._rate.rate is not None and self._rate.rate == self._rate_hint()
         if self._negotiated is not None:
-            agreed = self._negotiated
-            self._rtt.floor = self._timeout_floor(agreed.send_max_length, agreed.receive_max_length)
+            self._length_changed()
+            self._adapt_length(clean=False)  # the cap in characters moves with the rate
             self._size_receive_buffer()
         self._window_key = None
 
@@ -1392,6 +1446,12 @@ class Endpoint:
 
     def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
         self._peer_data_seen = True
+        # MARK, LEN, SEQ, TYPE, the long header's three and a CRC-16: the
+        # peer's packet about as long as it was on the line.
+        if (wire := len(data) + 10) > self._peer_length:
+            self._peer_length = wire
+            self._length_changed()
+            self._fit_receive_window()
         self._autotune(now)
         arrival = self._receiver.on_packet(seq, data, eof, now, self._rtt.timeout())
         if self._receiver.discard and arrival.fields and self._state is State.ESTABLISHED:
@@ -1654,6 +1714,9 @@ class Endpoint:
             pkt = s.pop_retransmit()
             assert pkt is not None
             self._counters["retransmissions"] += 1
+            self._length.lost()
+            self._adapt_length(clean=False)
+            self._length.sent(len(pkt.wire))
             self._transmit(pkt, now, timeout, out)
             if (
                 pkt.transmissions >= DOUBLE_FROM_COPY or not s.has_new_data()
@@ -1677,15 +1740,17 @@ class Endpoint:
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
-                # With long sequence numbers two characters of each data field
-                # carry the high bits: the capacity for data is two less.
-                capacity = self._capacity - 2 if self._long_seq else self._capacity
+                capacity = self._carried(self._length.length)
                 for field, used in self._encoding.encode_fields(s.queue, capacity, batch):
                     seq, head = self._seq_fields(s.next)
                     wire = build_packet(
                         Packet(seq=seq, type=PacketType.DATA, data=head + field), self._send_check
                     )
                     del s.queue[:used]
+                    # Exposure counts first sends and resends, whose losses
+                    # show; an idle copy's or a doubled resend's would not.
+                    self._length.sent(len(wire))
+                    self._mean_wire += (len(wire) - self._mean_wire) / 8
                     self._transmit(s.add(wire, used, eof=False), now, timeout, out)
             else:
                 seq, head = self._seq_fields(s.next)
@@ -1822,7 +1887,14 @@ class Endpoint:
         base = cfg.derived_dead_after()
         srtt = self._rtt.srtt
         if srtt is None:
-            return base if cfg.dead_after is not None else max(base, UNMEASURED_DEAD_AFTER)
+            # A listener that heard the connector's init again and again after
+            # answering knows the round trip is longer than that span, maybe
+            # twice as long (the connector doubles its wait, and a damaged
+            # copy hides one step): at 60 s one way without hints, the copies
+            # came 31 s apart, one was damaged, and a 60 s verdict ended the
+            # link 60 s before the connector's first data could arrive.
+            unmeasured = UNMEASURED_DEAD_AFTER + 2 * self._answer_span
+            return base if cfg.dead_after is not None else max(base, unmeasured)
         return max(base, OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout())
 
     def _ceiling(self) -> float:
@@ -1864,6 +1936,45 @@ class Endpoint:
             self._buffer_capped = need > cfg.buffer_cap
             want = max(want, min(need, cfg.buffer_cap))
         self._receiver.receive_buffer = max(self._receiver.receive_buffer, want)
+
+    def _fit_receive_window(self) -> None:
+        """Count the advertised window in packets as long as the peer's longest
+        so far (at least the starting length), not our receive limit: with
+        1024 announced and 128-character packets arriving, a 64 KiB buffer
+        offered 64 packets, and a 20 s line without hints ran at half speed.
+        A measuring peer at most doubles its length a step; a packet the
+        buffer cannot take is dropped, counted, and resent."""
+        agreed = self._negotiated
+        if agreed is not None:
+            longest = min(self._peer_length, agreed.receive_max_length)
+            self._receiver.capacity = data_capacity(longest, agreed.check)
+
+    def _length_changed(self) -> None:
+        """The data packet length moved: the pacer's full packet and the
+        timeout floor follow."""
+        self._pacer.full_packet = self._length.length + 1
+        self._rtt.floor = self._timeout_floor(self._length.length, self._peer_length)
+
+    def _adapt_length(self, *, clean: bool) -> None:
+        """Cut new data packets to the length the measured error rate favours
+        (:mod:`serialsocket._length`; ``clean``: a packet of the current length
+        was just acknowledged on its only copy), within the peer's limit and
+        ``max_packet_time`` at the rate in use.  Below the starting length only
+        with long sequence numbers: 31 shorter packets might not cover the
+        line's round trip."""
+        agreed = self._negotiated
+        if not self._adaptive or agreed is None:
+            return
+        upper = self.config.measured_length_cap(agreed.send_max_length, self._rate.rate)
+        lower = LADDER[0] if self._long_seq else self._start_length
+        before = self._length.length
+        if self._length.choose(lower, upper, self._carried, clean=clean) != before:
+            self._length_changed()
+
+    def _carried(self, length: int) -> int:
+        """Data characters a data packet of ``length`` carries."""
+        capacity = data_capacity(length, self._send_check)
+        return capacity - 2 if self._long_seq else capacity
 
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue
@@ -1920,15 +2031,24 @@ class Endpoint:
         return 2 * self._one_way() + self._tx(nak) - 2 * cr - TIME_EPSILON
 
     def _effective_window(self) -> int:
-        key = (self._sender.window, self._rtt.srtt, self._full_wire, self._rate.measured)
+        key = (self._sender.window, self._rtt.srtt, self._window_wire(), self._rate.measured)
         if key != self._window_key:
             self._window_key = key
             self._window_cached = self._compute_effective_window()
         return self._window_cached
 
+    def _window_wire(self) -> int:
+        """Wire bytes of the packets the window is counted in: full ones, or the
+        recent data packets' mean when shorter, rounded up to 16.  A window
+        counted in 1024-character packets held telemetry of 176 characters a
+        packet to 31 packets a round trip, and it queued behind them."""
+        mean = min(self._full_wire, math.ceil(self._mean_wire / 16) * 16)
+        return max(mean, 16)
+
     def _compute_effective_window(self) -> int:
         window = self._sender.window
-        tx = self._tx(self._full_wire)
+        wire = self._window_wire()
+        tx = self._tx(wire)
         if tx <= 0:
             # Rate unknown: nothing says how much the line holds.  With mod-64
             # numbers, the classic 31 packets.  With long sequence numbers,
@@ -1940,7 +2060,7 @@ class Endpoint:
             measured, srtt = self._rate.measured, self._rtt.srtt
             if not self._long_seq or measured is None or srtt is None:
                 return min(window, MAX_WINDOW)
-            grown = math.ceil(2 * measured * srtt / self._full_wire) + 5
+            grown = math.ceil(2 * measured * srtt / wire) + 5
             return max(1, min(window, max(MAX_WINDOW, grown)))
         rtt = max(self._rtt.srtt if self._rtt.srtt is not None else 0.0, self._min_rtt())
         # The window must outlast the repair of a loss, or the line idles.

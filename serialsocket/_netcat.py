@@ -38,7 +38,12 @@ from dataclasses import dataclass
 import trio
 
 from ._capture import CaptureFile, CapturingStream
-from ._config import MAX_WINDOW, EndpointConfig
+from ._config import (
+    ADAPTIVE_RECEIVE_LENGTH,
+    DEFAULT_MAX_PACKET_TIME,
+    MAX_WINDOW,
+    EndpointConfig,
+)
 from ._driver import LinkBroken
 from ._encoding import EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 from ._errors import LocalProtocolError
@@ -94,8 +99,18 @@ def add_arguments(ap: argparse.ArgumentParser, *, listening: bool) -> None:
         "--max-len",
         type=int,
         default=None,
-        help=f"largest packet to receive, MARK..CHECK (default {DEFAULT_MAX_PACKET_LENGTH}, "
-        "longer on a fast line with --delay of a second or more)",
+        help="fixed packet length, MARK..CHECK (default: measured; packets start at "
+        f"{DEFAULT_MAX_PACKET_LENGTH} and follow the byte error rate the losses show, up to "
+        f"{ADAPTIVE_RECEIVE_LENGTH} on a clean line)",
+    )
+    ap.add_argument(
+        "--max-packet-time",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="with the length measured, the most line time one data packet may take (default: "
+        "no cap, as suits a byte stream; a command channel's library default is "
+        f"{DEFAULT_MAX_PACKET_TIME:g} s, what an urgent message may wait behind)",
     )
     ap.add_argument(
         "--delay",
@@ -262,6 +277,7 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
         dense=args.dense,  # a byte stream of any content: dense unless told otherwise
         window=args.window,
         max_packet_length=args.max_len,
+        max_packet_time=args.max_packet_time,
         one_way_delay=args.delay,
         line_rate=rate,
         dead_after=args.dead_after,

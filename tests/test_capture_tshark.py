@@ -133,7 +133,7 @@ def test_a_serial_socket_session(tmp_path: pathlib.Path) -> None:
     assert _direction(first) == Direction.OUTBOUND
     assert (first["telelink.check.type"], first["telelink.check.good"]) == ("3", "1")
     assert (first["telelink.init.window"], first["telelink.init.version"]) == ("31", "1")
-    assert first["telelink.init.maxlx"] == "121"  # 128 - 7
+    assert first["telelink.init.maxlx"] == "1017"  # 1024 - 7: the length is measured
     # The answer arrives one byte per chunk: shown once, where its last byte is.
     answers = [r for r in rows if r["telelink.type"] == "Y" and r["telelink.seq"] == "0"]
     assert len(answers) == 1

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+from linksim.link import GilbertElliott
 from serialsocket import EndpointConfig
 
 from ._codec import sample_payload
@@ -120,8 +121,10 @@ class Point:
         seed: seeds the payload and the line's impairments.
         hints: what both ends are told about the line (:data:`HINTS`):
             ``exact``, ``none`` or one value 10x off.
-        derived_len: ``max_len`` is the length the endpoints derive from
-            their hints (the user's default), not a configured one.
+        derived_len: the user's default: no length is configured, the
+            endpoints measure it (serialsocket/PROTOCOL.md 4.7) starting
+            from ``max_len``, the length they derive from their hints, and
+            the limit is that of the best length they may choose.
     """
 
     baud: int
@@ -368,18 +371,49 @@ def _sweep_rate_window() -> Iterable[Point]:
         yield _auto(replace(BASE, baud=r, window=31))
 
 
-def derived_point(point: Point) -> Point:
-    """``point`` with the packet length its endpoints derive from their hints
-    (what a user who configures nothing but the hints gets)."""
+def _user_config(point: Point) -> EndpointConfig:
+    """The configuration of a user who gives nothing but the hints."""
     delay, rate = hinted(point.hints, point.delay, point.baud)
-    cfg = EndpointConfig(
+    return EndpointConfig(
         one_way_delay=delay,
         line_rate=rate,
         bits_per_char=BITS_PER_CHAR,
         window=point.window,
         encoding=PROFILES[point.profile],
     )
+
+
+def derived_point(point: Point) -> Point:
+    """``point`` as a user who configures nothing but the hints runs it: the
+    packet length measured, starting where the hints put it."""
+    cfg = _user_config(point)
     return replace(point, max_len=cfg.derived_max_packet_length(), derived_len=True)
+
+
+def _best_limit(
+    point: Point, payload: bytes, burst: GilbertElliott | None
+) -> tuple[float, float, int]:
+    """``(limit, packet error probability, length)`` at the length a measuring
+    sender may choose whose limit is highest (the peer's receive limit, and
+    ``max_packet_time`` at the line's real rate, bound the candidates)."""
+    lengths = _user_config(point).packet_lengths(rate=point.baud / BITS_PER_CHAR)
+    return max(
+        (
+            (
+                *limit_goodput(
+                    payload,
+                    rate=point.baud,
+                    max_len=n,
+                    encoding=PROFILES[point.profile],
+                    byte_error_rate=point.ber,
+                    burst=burst,
+                ),
+                n,
+            )
+            for n in lengths
+        ),
+        key=lambda best: best[0],
+    )
 
 
 RANGE_DELAYS = (0.0, 1.3, 5.0, 20.0, 60.0, 300.0, 1200.0)
@@ -496,14 +530,18 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
     payload = make_payload(point.payload, size, point.seed)
     encoding = PROFILES[point.profile]
     burst = BENCH_BURST if point.burst else None
-    limit, p_hit = limit_goodput(
-        payload,
-        rate=point.baud,
-        max_len=point.max_len,
-        encoding=encoding,
-        byte_error_rate=point.ber,
-        burst=burst,
-    )
+    if point.derived_len:
+        limit, p_hit, limit_len = _best_limit(point, payload, burst)
+    else:
+        limit_len = point.max_len
+        limit, p_hit = limit_goodput(
+            payload,
+            rate=point.baud,
+            max_len=point.max_len,
+            encoding=encoding,
+            byte_error_rate=point.ber,
+            burst=burst,
+        )
     line_bps = point.baud / BITS_PER_CHAR
     # Cap virtual time at 5x the time at the limit, or at 4 stop-and-wait
     # round trips per packet, whichever is longer: a configuration that cannot
@@ -518,7 +556,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         byte_error_rate=point.ber,
         burst=burst,
         window=point.window,
-        max_len=point.max_len,
+        max_len=None if point.derived_len else point.max_len,
         encoding=encoding,
         seed=point.seed,
         time_cap=cap,
@@ -540,7 +578,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
             "error_bad": burst.error_bad,
         },
         "window": point.window,
-        "max_packet_len": point.max_len,
+        "max_packet_len": limit_len,
         "payload": point.payload,
         "payload_bytes": size,
         "seconds": round(m.seconds, 3),
@@ -552,7 +590,8 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         # Extras.
         "profile": point.profile,
         "default_window": point.window == default_window(),
-        "length_policy": "auto" if point.auto_len else "derived" if point.derived_len else "fixed",
+        "length_policy": "auto" if point.auto_len else "measured" if point.derived_len else "fixed",
+        "start_packet_len": point.max_len,
         "hints": point.hints,
         "time_to_first_byte_s": None
         if m.first_byte_seconds is None

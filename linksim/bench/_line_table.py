@@ -204,7 +204,8 @@ class LineLimit:
     """The theoretical limit of a row's line for what the two ends agree on.
 
     Attributes:
-        max_packet_length: the agreed packet length, MARK through CHECK.
+        max_packet_length: the packet length of the limit, MARK through CHECK: the
+            best of those the sender may choose (serialsocket/PROTOCOL.md 4.7).
         encoding: the agreed data encoding: ``escape``, ``radix-91`` or
             ``prefix`` (classic Kermit prefixing, a peer without ``dense``).
         check: the agreed block check (``CRC16``, ``CRC32``, ...).
@@ -235,6 +236,7 @@ def netcat_config(row: TransferRow, *, hints: bool, dense: bool = True) -> Endpo
         dense=dense,
         one_way_delay=row.delay if hints else 0.0,
         line_rate=float(row.rate) if hints else None,
+        max_packet_time=None,  # the netcat's default: no cap for a byte stream
     )
 
 
@@ -275,7 +277,15 @@ def line_limit(
     if not payload:
         raise ValueError("the limit is measured on a payload: it cannot be empty")
     config = netcat_config(row, hints=hints, dense=dense)
-    length = config.derived_max_packet_length()
+    # The sender measures its packet length (serialsocket/PROTOCOL.md 4.7):
+    # the limit is the best of the lengths it may choose.
+    return max(
+        (_limit_at(row, payload, config, length) for length in config.packet_lengths()),
+        key=lambda limit: limit.share,
+    )
+
+
+def _limit_at(row: TransferRow, payload: bytes, config: EndpointConfig, length: int) -> LineLimit:
     agreed = _agree(replace(config, max_packet_length=length, long_window=None))
     capacity = data_capacity(agreed.send_max_length, agreed.check)
     fields = agreed.encoding.encode_fields(payload, capacity, 1 << 30)

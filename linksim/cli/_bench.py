@@ -234,7 +234,7 @@ def _print_goodput_table(rows: Sequence[dict[str, Any]]) -> None:
     for r in rows:
         errors = "burst" if r["burst"] else f"{r['byte_error_rate']:g}"
         policy = r["length_policy"]
-        mark = {"auto": "a", "derived": "d"}.get(policy, "")
+        mark = {"auto": "a", "measured": "m"}.get(policy, "")
         length = f"{r['max_packet_len']}{mark}"
         first = r.get("time_to_first_byte_s")
         first_text = "-" if first is None else f"{first:.1f}"
@@ -249,7 +249,8 @@ def _print_goodput_table(rows: Sequence[dict[str, Any]]) -> None:
             f"{r.get('hints', 'exact'):>16} {first_text:>9}{flag}"
         )
     print(
-        "* default window; a: automatic packet length; d: derived from the hints; "
+        "* default window; a: automatic packet length; m: measured by the ends (from the "
+        "length the hints derive; the limit at the best length they may choose); "
         "eff = goodput / line bytes/s; 1st byte: s from connect to the first byte read"
     )
 

@@ -153,6 +153,8 @@ class Predictor:
         self._in_flight: dict[int, Command] = {}
         self._plan: PreviewReport | None = None
         self._dirty = True
+        self._finished: list[Sequence[float]] = []
+        """The predicted path of the command completed last (see :meth:`observe`)."""
         self.model_error: str | None = None
         """Why the model cannot predict now (a reported pose it cannot stand in), or None."""
         self.confirmed: Feedback | None = None
@@ -204,6 +206,7 @@ class Predictor:
                 self._rebase(feedback)
             return None
         outcome = step.outcomes[0]
+        self._finished = [q for _t, q in outcome.path]
         predicted = outcome.reason.name if not outcome.ok else None
         mismatch = None
         if predicted != failure:
@@ -227,7 +230,11 @@ class Predictor:
         """A telemetry sample: compare it with the predicted path of the running command."""
         self.confirmed, self.confirmed_at = feedback, now
         plan = self.plan
-        points: list[Sequence[float]] = [self._base.world.initial_joints]
+        # Samples taken during the command completed last may arrive after its
+        # completion: both come in one read when the link bunches them (one
+        # 512-character packet carried five samples and the completion) and
+        # the client hands them on in its own order.
+        points: list[Sequence[float]] = [self._base.world.initial_joints, *self._finished]
         if plan is not None:
             # The arm runs the head of the queue; its completion may still be
             # on the wire while the next one's samples arrive: two commands.
@@ -240,6 +247,7 @@ class Predictor:
     def reset(self, feedback: Feedback, now: float) -> None:
         """Start over from a reported state with nothing in flight (an observer joining)."""
         self._in_flight.clear()
+        self._finished = []
         self._rebase(feedback)
         self.confirmed, self.confirmed_at = feedback, now
 

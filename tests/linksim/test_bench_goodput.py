@@ -205,7 +205,7 @@ def test_a_point_without_hints_reports_its_hints_and_time_to_first_byte() -> Non
     for r in rows:
         assert r["ok"]
         assert r["complete"]
-        assert r["length_policy"] == "derived"
+        assert r["length_policy"] == "measured"
         # The first bytes ride in the connection request (early data): one
         # delay, not the handshake's round trip and one more.
         assert 0.27 <= r["time_to_first_byte_s"] < 3 * 0.27

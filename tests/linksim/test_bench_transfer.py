@@ -45,47 +45,52 @@ def test_limit_is_goodput_s_for_a_classic_peer(row: TransferRow, encoding: objec
         encoding=encoding,  # type: ignore[arg-type]
         byte_error_rate=row.ber,
     )
-    assert classic.share == goodput / (row.rate / 10)
+    assert classic.share == pytest.approx(goodput / (row.rate / 10), rel=1e-12)
     assert classic.packet_error == p_hit
 
 
-def test_limit_on_a_printable_line_is_radix_91_at_128() -> None:
+def test_limit_on_a_printable_line_is_radix_91_at_the_best_length() -> None:
     limit = table.line_limit(PRINTABLE_1E4, _payload(PRINTABLE_1E4))
-    assert (limit.encoding, limit.max_packet_length, limit.check) == ("radix-91", 128, "CRC16")
-    # An extended-length packet: 7 header characters, room for 118 data
-    # characters of which radix 91 fills 117 (7 blocks of 13 bytes in 16
+    # The sender measures its packet length (serialsocket/PROTOCOL.md 4.7):
+    # the limit is the best length it may choose, 384 at 1e-4.
+    assert (limit.encoding, limit.max_packet_length, limit.check) == ("radix-91", 384, "CRC16")
+    assert limit.share == limit.carried / limit.wire * (1 - limit.packet_error)
+    # At 128, an extended-length packet: 7 header characters, room for 118
+    # data characters of which radix 91 fills 117 (7 blocks of 13 bytes in 16
     # characters, a 4-byte tail in 5: 95 bytes), 3 CRC characters and the
-    # EOL: 128 on the line.
-    assert (limit.carried, limit.wire) == (95.0, 128.0)
-    assert limit.packet_error == 1 - (1 - 1e-4) ** 128
-    assert limit.share == 95 / 128 * (1 - 1e-4) ** 128
+    # EOL: 128 on the line.  The best length does better.
+    assert limit.share > 95 / 128 * (1 - 1e-4) ** 128
 
 
 def test_limit_on_an_8_bit_line_is_the_escape_code() -> None:
     payload = _payload(MOON_1E4)
     dense = table.line_limit(MOON_1E4, payload)
     classic = table.line_limit(MOON_1E4, payload, dense=False)
-    assert (dense.encoding, dense.max_packet_length, dense.check) == ("escape", 128, "CRC16")
+    assert (dense.encoding, dense.max_packet_length, dense.check) == ("escape", 384, "CRC16")
     assert dense.share == dense.carried / dense.wire * (1 - dense.packet_error)
     # Escaping costs about 1 % on random binary where Kermit prefixing costs 27 %.
-    assert 1.0 < dense.wire / dense.carried < 1.11
-    assert 0.8 < dense.share < 0.9
+    assert 1.0 < dense.wire / dense.carried < 1.05
+    assert 0.9 < dense.share < 0.95
     assert classic.share < dense.share
     clean = table.line_limit(TRANSFER_ROWS[0], _payload(TRANSFER_ROWS[0]))
     assert clean.packet_error == 0.0
     assert clean.share == clean.carried / clean.wire
 
 
-def test_limit_follows_the_packet_length_the_hints_derive() -> None:
-    """9600 bit/s, 1.3 s: 128 without hints, 256 with them (31 packets of 128
-    cannot cover a repair), and at 1e-3 the longer packet is hit more often."""
+def test_limit_is_at_the_best_length_whatever_the_hints() -> None:
+    """9600 bit/s, 1.3 s, 1e-3: the packets start at 128 without hints and 256
+    with them (31 packets of 128 cannot cover a repair), but the length is
+    measured, and the best at 1e-3 is 96 (the longest normal packet); on a
+    clean line, the whole receive limit."""
     row = TRANSFER_ROWS[4]
     payload = _payload(row)
     plain = table.line_limit(row, payload)
     hinted = table.line_limit(row, payload, hints=True)
-    assert (plain.max_packet_length, hinted.max_packet_length) == (128, 256)
-    assert hinted.packet_error > plain.packet_error
-    assert 0 < hinted.share < plain.share < 1
+    assert plain == hinted
+    assert plain.max_packet_length == 96
+    clean = table.line_limit(TRANSFER_ROWS[0], _payload(TRANSFER_ROWS[0]))
+    assert clean.max_packet_length == 1024
+    assert plain.share < clean.share < 1
 
 
 def test_limit_needs_a_payload() -> None:
@@ -200,7 +205,8 @@ def test_one_small_transfer_delivers(capsys: pytest.CaptureFixture[str]) -> None
         None,
     )
     assert (row["bytes"], row["seed"], row["connect_exit"], row["listen_exit"]) == (512, 1, 0, 0)
-    assert (row["encoding"], row["max_packet_len"], row["check"]) == ("escape", 128, "CRC16")
+    assert (row["encoding"], row["check"]) == ("escape", "CRC16")
+    assert 128 <= row["max_packet_len"] <= 1024
     assert 0 < row["limit_share"] < 1
     assert row["line_share"] > 0
     assert row["ratio_to_limit"] == pytest.approx(row["line_share"] / row["limit_share"], abs=2e-3)

@@ -96,8 +96,9 @@ def test_connect_exchange_exact() -> None:
     init = a.data_to_send(0.0)
     assert init == build_packet(
         # MAXL 94, TIME 2 s, no padding, CR, '#', '&' wanted, CRC-16 forced ('5'), '~',
-        # long packets + windows, window 4, MAXLX 121, telelink v1, timeout hint 2500 ms.
-        Packet(seq=0, type="I", data=b'~" @-#&5~&$!:0___@"TL@! :>'),
+        # long packets + windows, window 4, MAXLX 1017 (it receives 1024: the packet
+        # length is measured, PROTOCOL.md 4.7), telelink v1, timeout hint 2500 ms.
+        Packet(seq=0, type="I", data=b'~" @-#&5~&$*c0___@"TL@! :>'),
         BlockCheck.CRC16,
     )
     assert a.get_timer() == 2.5
@@ -111,7 +112,8 @@ def test_connect_exchange_exact() -> None:
     assert stats.timeout == 6.0
     params = a.parameters
     assert params is not None
-    assert (params.window, params.check, params.send_max_length) == (4, BlockCheck.CRC16, 128)
+    assert (params.window, params.check, params.send_max_length) == (4, BlockCheck.CRC16, 1024)
+    assert stats.packet_length == 128  # the measured length starts at the derived one
     assert params.encoding.qbin == ord("&")
 
 
@@ -504,7 +506,11 @@ def test_large_write_is_cut_into_full_packets_and_short_write_goes_at_once() -> 
 
 
 def test_zero_window_then_reopen() -> None:
-    cfg = EndpointConfig(dense=False, one_way_delay=D, window=31, receive_buffer=18_062)
+    # 128-character packets: the window closes a packet's worth before the
+    # buffer is full, and the bound below is in such packets.
+    cfg = EndpointConfig(
+        dense=False, one_way_delay=D, window=31, receive_buffer=18_062, max_packet_length=128
+    )
     a, b, t = connected(cfg)
     link = SimLink(a, b, delay=D)
     link.now = t
@@ -754,4 +760,5 @@ def test_derived_packet_length_follows_a_fast_long_line_only() -> None:
     )
     a, _b, _t = connected(EndpointConfig(line_rate=9600, one_way_delay=1.3))
     assert a.parameters is not None
-    assert a.parameters.send_max_length == 256
+    assert a.parameters.send_max_length == 1024  # what the peer receives (PROTOCOL.md 4.7)
+    assert a.statistics().packet_length == 256  # where the measured length starts

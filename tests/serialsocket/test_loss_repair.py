@@ -174,8 +174,10 @@ def test_a_packet_lost_on_its_resend_goes_out_twice_next_time() -> None:
     """Lost on its first copy and on its resend, a packet holds the window's
     base for a third round trip; its next resend goes out twice, so a third
     loss (one in 20 at 512 characters and 1e-4) does not add a fourth.
-    Mid-transfer: new data is still queued when it goes."""
-    cfg = dataclasses.replace(LONG, idle_copies=0)
+    Mid-transfer: new data is still queued when it goes.  (512 characters,
+    fixed: the scenario counts copies by wire sequence number, and packet 67
+    must come after the third copy of packet 3.)"""
+    cfg = dataclasses.replace(LONG, idle_copies=0, max_packet_length=512)
     a, b, link = _long_pair(cfg, drop={(3, 1), (3, 2), (3, 3)})
     payload = bytes(range(256)) * 120
     got, _elapsed = _send_all(a, b, link, payload)

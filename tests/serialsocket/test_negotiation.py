@@ -130,7 +130,7 @@ def test_a_connector_offers_escape_and_radix91_in_one_xcapas_character() -> None
     a = Endpoint(EndpointConfig(dense=True, long_window=None))
     a.connect(0.0)
     field = _init_field(a, 0.0)
-    assert field == b'~  @-#&5~&?!:0___@"TL@!  R6!'  # PROTOCOL.md 10.1's example
+    assert field == b'~  @-#&5~&?*c0___@"TL@!  R6!'  # PROTOCOL.md 10.1's example
     assert InitParameters.decode(field).features == (
         FEATURE_ESCAPE | FEATURE_RADIX91 | FEATURE_EXPEDITED
     )

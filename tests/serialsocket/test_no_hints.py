@@ -138,3 +138,29 @@ def test_no_hints_at_a_minute_one_way_is_not_judged_dead() -> None:
     )
     assert m.end == "complete"
     assert m.ok
+
+
+def test_no_hints_at_300_bit_s_sends_no_storm_of_inits() -> None:
+    """Resending the connection request 50 ms apart, doubling (the derived
+    timeout with no hints) piled eight 96-character inits, 26 s of line, on a
+    300 bit/s line before the first answer; the listener answered each, the
+    data queued behind them timed out, and every resend deepened the queue:
+    0.008 of the limit.  Unhinted, the first resend now waits RFC 6298's 1 s."""
+    m = simulate(
+        random.Random(300).randbytes(4000),
+        rate=300,
+        delay=1.3,
+        byte_error_rate=0.0,
+        burst=None,
+        window=31,
+        max_len=None,
+        encoding=PRINTABLE,
+        seed=1,
+        time_cap=2000,
+        hints="none",
+    )
+    assert m.end == "complete"
+    assert m.ok
+    assert m.retransmissions == 0
+    # The line's limit is about 15 bytes a second for random binary, printable.
+    assert m.delivered / m.seconds > 13.5

@@ -392,7 +392,8 @@ def test_the_init_fields_say_what_section_3_says() -> None:
     assert field[:9] == b"~  @-#&5~"  # MAXL 94, TIME, NPAD 0, PADC NUL, EOL CR, #, &, FORCE-3, ~
     assert field[9] - 32 == 2 | 4  # CAPAS: long packets, sliding windows
     assert field[10] - 32 == 31  # WINDO
-    assert (field[11] - 32) * 95 + field[12] - 32 == 128 - 7  # MAXLX: DATA + CHECK of 128
+    # MAXLX: DATA + CHECK of 1024, the measured length's receive limit (PROTOCOL.md 4.7)
+    assert (field[11] - 32) * 95 + field[12] - 32 == 1024 - 7
     assert field[13:17] == b"0___"  # CHKPNT, CHKINT
     assert field[17:21] == b'@"TL'  # WHATAMI, SYSID "TL"
 

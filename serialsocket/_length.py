@@ -1,0 +1,114 @@
+"""The data packet length, measured rather than configured (PROTOCOL.md 4.7).
+
+A packet's header and check are a fixed cost, so longer packets carry more of
+the line as data -- until the line damages them: at a byte error rate ``q`` a
+packet of ``n`` wire characters arrives intact with probability ``(1 - q)^n``
+and the goodput of a length is ``carried(n) / n x (1 - q)^n``.  The best
+length is about ``sqrt(overhead / q)``: all of the receive limit on a clean
+line, about 384 characters at ``q = 1e-4`` and 96 at ``1e-3`` (the goodput
+grid, bench/results/README.md).  Nothing tells the sender ``q``; its own
+losses do.  :class:`LengthChooser` keeps the maximum-likelihood estimate --
+packets lost per wire character sent, both decayed with a half-life of
+:data:`HALF_LIFE` characters so that a line that changes is followed -- and
+picks the best length under it.  A few losses are weak evidence: a 8 KiB
+transfer at a byte error rate of 1e-4 sees one or two, and their estimate
+swings between 0 and 5e-4.  So the estimate starts from
+:data:`PRIOR_EXPOSURE` clean characters, and a step up is judged by a
+cautious one (half a loss more, :data:`UP_LOSSES`) while a step down follows
+the plain estimate: the goodput curve is flat near its best (within 3 % from
+half to twice the best length), steep far from it.
+
+Shorter takes effect at once (every packet at the old length risks the
+error rate just measured); longer one step at a time, each step earned by a
+packet of the current length acknowledged on its only copy (``clean``), at
+most doubling: a line that has shown no loss yet has shown little else, and
+a step too far costs the packets sent in one round trip before the losses
+say so.  Sans-I/O: the endpoint reports what it sent, lost and got
+acknowledged, and asks which length to cut next.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+__all__ = ["HALF_LIFE", "LADDER", "PRIOR_EXPOSURE", "UP_LOSSES", "LengthChooser"]
+
+LADDER = (96, 128, 192, 256, 384, 512, 768, 1024, 1536, 2048, 3072, 4096, 6144, 9024)
+"""The lengths (MARK through CHECK) a measured packet length takes.  96 is the
+longest normal packet (LEN up to 94): below it the extended header's three
+characters are saved, which is why 96 beats 128 at a byte error rate of 1e-3."""
+
+PRIOR_EXPOSURE = 4096
+"""Clean wire characters the estimate starts from: the first loss after 1 KB
+says 2e-4, not 1e-3, and two more are needed to say 6e-4."""
+
+UP_LOSSES = 0.5
+"""Losses added to the estimate a step up is judged by: with none seen, 128
+to 256 after 2 KB, 512 after 8 KB, 1024 after about 20 KB."""
+
+HALF_LIFE = 64 * 1024
+"""Wire characters after which a loss counts half: about ten losses' worth of
+evidence at a byte error rate of 1e-4, four and a half minutes at 2400 bit/s."""
+
+
+class LengthChooser:
+    """The length of the next data packet, from the losses seen (module docstring).
+
+    Attributes:
+        length: the length (MARK through CHECK) to cut new data packets to.
+    """
+
+    def __init__(self, start: int) -> None:
+        self.length = start
+        self._losses = 0.0
+        self._exposure = 0.0
+
+    @property
+    def byte_error_rate(self) -> float | None:
+        """Packets lost per wire character sent (decayed, from
+        :data:`PRIOR_EXPOSURE` clean ones), or None before any was sent."""
+        return self._estimate(0.0) if self._exposure > 0 else None
+
+    def _estimate(self, extra_losses: float) -> float:
+        return (self._losses + extra_losses) / (self._exposure + PRIOR_EXPOSURE)
+
+    def sent(self, wire_bytes: int) -> None:
+        """A data packet of ``wire_bytes`` characters went on the line (any copy)."""
+        decay = 0.5 ** (wire_bytes / HALF_LIFE)
+        self._losses *= decay
+        self._exposure = self._exposure * decay + wire_bytes
+
+    def lost(self) -> None:
+        """A data packet is being resent: the line lost one (or its ACK)."""
+        self._losses += 1.0
+
+    def best(
+        self, lower: int, upper: int, carried: Callable[[int], int], *, extra_losses: float = 0.0
+    ) -> int:
+        """The length in ``lower..upper`` with the best goodput at the estimated
+        error rate (with ``extra_losses`` added): ``carried(n)`` is the data
+        characters a packet of ``n`` carries (the rungs of :data:`LADDER` in
+        range, and ``upper``)."""
+        q = self._estimate(extra_losses)
+        options = [n for n in LADDER if lower <= n < upper] + [upper]
+        return max(options, key=lambda n: carried(n) / (n + 1) * (1.0 - q) ** (n + 1))
+
+    def choose(self, lower: int, upper: int, carried: Callable[[int], int], *, clean: bool) -> int:
+        """Set and return :attr:`length`: the best length (:meth:`best`) if it is
+        shorter; else, when ``clean`` (a packet of the current length was just
+        acknowledged on its only copy) and the cautious estimate's best is
+        longer, one step towards that, at most twice the current length; with
+        ``lower > upper``, ``upper``."""
+        lower = min(lower, upper)
+        current = min(max(self.length, lower), upper)
+        if (down := self.best(lower, upper, carried)) < current:
+            current = down
+        elif (
+            clean and (target := self.best(lower, upper, carried, extra_losses=UP_LOSSES)) > current
+        ):
+            current = max(
+                (n for n in (*LADDER, target) if current < n <= min(target, 2 * current)),
+                default=current,
+            )
+        self.length = current
+        return current
