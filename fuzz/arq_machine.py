@@ -10,6 +10,14 @@ None) followed by a fixed propagation delay.  What an endpoint writes is cut
 into one chunk per packet (at each MARK), so rules can name "the third packet
 on the line".
 
+Before connecting, A may queue bytes with ``send`` (nothing, a few bytes, text,
+or more than its drawn ``early_data`` bound): its init carries the first of
+them as early data (PROTOCOL.md section 13), which B delivers on accepting
+when its own configuration takes early data (``early_data`` not 0, and the
+XLANES field the expedited lane brings); otherwise, and for whatever did not
+fit, they go as ordinary data.  The line rules below drop, duplicate, delay and
+damage the init like any other packet, so it is resent and arrives in copies.
+
 Hypothesis then interleaves application calls, time, and impairments:
 
 * the application sends (random bytes, long runs, control and prefix
@@ -68,6 +76,10 @@ After every step (``@invariant``):
 * an endpoint that reports EndOfStream has delivered everything its peer sent,
   and the peer did call ``send_eof``;
 * once a side has every packet acknowledged, its peer has delivered every byte;
+* early data is taken all or nothing and once: B's ``early_received`` is 0 or
+  A's ``early_sent`` (never twice that, whatever copies of the init arrive),
+  A drops the bytes from its queue (``early_delivered``) exactly when B took
+  them, and B takes them exactly when its configuration allows;
 * expedited messages are read whole, once each and in the order sent;
 * latest values are read in the order offered (each carries a per-side
   counter), each at most once, possibly with gaps, and each is one the peer
@@ -119,15 +131,25 @@ from serialsocket.argtypes import ENDPOINT_LENGTH
 from serialsocket.packets import EIGHT_BIT_CLEAN, MAX_PACKET_LENGTH, PRINTABLE, BlockCheck
 
 __all__ = [
+    "DEFAULT_EARLY_DATA",
     "FINISH_MAX_EVENTS",
     "LINGER",
     "LIVENESS_TIMEOUT",
+    "MAX_EARLY_DATA",
     "ARQMachine",
     "Chunk",
     "Line",
+    "early_payloads",
     "payloads",
     "split_packets",
 ]
+
+DEFAULT_EARLY_DATA = EndpointConfig().early_data
+"""Bytes of early data an endpoint takes by default."""
+
+MAX_EARLY_DATA = 512
+"""The most ``EndpointConfig.early_data`` accepts (it refuses 513;
+fuzz/test_arq_stateful.py checks that this is the bound)."""
 
 LIVENESS_TIMEOUT = 1e6
 """``dead_after`` and ``connect_timeout`` for both endpoints (seconds): far beyond
@@ -147,10 +169,17 @@ without a bound, a few ``advance_time`` steps jump from idle probe to idle probe
 declared dead.  With it, no silence before healing nears ``dead_after``, and
 healing plus closing (``FINISH_MAX_SECONDS``) ends before it, too."""
 
-FINISH_MAX_EVENTS = 20_000
+FINISH_MAX_EVENTS = 50_000
 """Events (timer firings plus chunk arrivals) the healed link may take to close.
-A clean close of the largest transfer (a few KB in 12-byte packets at window 1)
-takes a few thousand; more means a livelock."""
+The largest transfer left at healing is a full send buffer each way (64 KiB, the
+largest drawn; early data only moves up to 512 of those bytes into the init).
+At the smallest length (38: 31 data characters with CRC-16) in the printable
+profile without the dense encodings, random bytes take 1.78 characters each:
+17 bytes a packet, 3,800 data packets a side, 7,600 in all; each costs its
+arrival, its ACK's arrival and, at 300 bit/s, a pacing timer: 3 events, about
+23,000 (measured: 22,764; 15,300 with the rate unknown).  A stream of 8-bit
+controls (3 characters a byte, 5 bytes a packet) took 39,296; more than this
+bound means a livelock."""
 
 FINISH_MAX_SECONDS = LIVENESS_TIMEOUT / 2
 """Simulated seconds the healed link may take to close.  Generous on purpose: a
@@ -264,6 +293,26 @@ _CHECKS = st.sampled_from([BlockCheck.CRC16, BlockCheck.CRC16, BlockCheck.CRC32]
 """CRC-32 in a third of the draws: asked for by one side, it is agreed
 between two dense ends (PROTOCOL.md section 10.2)."""
 _LONG_WINDOWS = st.sampled_from([None, 32, 100, 4095, 131071])
+_EARLY_DATA = st.one_of(
+    st.sampled_from([0, 1, 16, DEFAULT_EARLY_DATA, MAX_EARLY_DATA]),
+    st.integers(0, MAX_EARLY_DATA),
+)
+"""``EndpointConfig.early_data``: none (a listener that takes none, a connector
+that sends none), a byte, the default, the most, or anything between."""
+
+
+def early_payloads() -> st.SearchStrategy[bytes]:
+    """What the connector queues before connecting (PROTOCOL.md section 13): often
+    nothing, a short command, text, the payloads above, or a random block longer
+    than any early-data bound (up to three times ``MAX_EARLY_DATA``), whose tail
+    goes as ordinary data."""
+    text = st.text(max_size=80).map(lambda s: s.encode())
+    block = st.builds(
+        lambda seed, n: random.Random(seed).randbytes(n),
+        st.integers(0, 2**32 - 1),
+        st.integers(1, 3 * MAX_EARLY_DATA),
+    )
+    return st.one_of(st.just(b""), st.binary(min_size=1, max_size=16), text, payloads(700), block)
 
 
 @st.composite
@@ -287,6 +336,10 @@ def endpoint_configs(
         # expedited lane (it rides on the same XLANES offer).
         latest=draw(st.sampled_from([True, True, True, False])),
         check=draw(_CHECKS),
+        # Early data (section 13): sent by a connector with the XLANES field
+        # (expedited) and early_data not 0, taken by a listener likewise; any
+        # other pair sends the bytes as ordinary data.
+        early_data=draw(_EARLY_DATA),
         xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
         line_rate=line_rate,
@@ -325,6 +378,8 @@ class ARQMachine(RuleBasedStateMachine):
         self.events: dict[str, list[Event]] = {s: [] for s in SIDES}
         self.healed = False
         self._eof_called = dict.fromkeys(SIDES, False)
+        self.early_queued = 0
+        """Bytes A's ``send`` took before ``connect``: the most its init may carry."""
 
     # -- plumbing ---------------------------------------------------------------------
 
@@ -432,8 +487,11 @@ class ARQMachine(RuleBasedStateMachine):
         data=st.data(),
         one_way_delay=_DELAYS,
         line_rate=_RATES,
+        early=early_payloads(),
     )
-    def setup(self, data: st.DataObject, one_way_delay: float, line_rate: float | None) -> None:
+    def setup(
+        self, data: st.DataObject, one_way_delay: float, line_rate: float | None, early: bytes
+    ) -> None:
         configs = {
             side: data.draw(
                 endpoint_configs(one_way_delay=one_way_delay, line_rate=line_rate),
@@ -441,10 +499,27 @@ class ARQMachine(RuleBasedStateMachine):
             )
             for side in SIDES
         }
+        self.start(configs, one_way_delay=one_way_delay, line_rate=line_rate, early=early)
+
+    def start(
+        self,
+        configs: dict[str, EndpointConfig],
+        *,
+        one_way_delay: float,
+        line_rate: float | None,
+        early: bytes = b"",
+    ) -> None:
+        """B listens; A queues ``early`` (what its send buffer takes) and connects."""
         self.ep = {side: Endpoint(configs[side]) for side in SIDES}
         self.lines = {d: Line(delay=one_way_delay, rate=line_rate) for d in DIRECTIONS}
         self.ep["b"].listen()
-        self.ep["a"].connect(self.now)
+        a = self.ep["a"]
+        free = a.send_buffer_free
+        taken = a.send(early, self.now)
+        assert taken == min(len(early), free), (taken, len(early), free)
+        self.sent["a"] += early[:taken]
+        self.early_queued = taken
+        a.connect(self.now)
         self._flush()
 
     # -- choosing among what is possible ----------------------------------------------
@@ -773,6 +848,43 @@ class ARQMachine(RuleBasedStateMachine):
                 assert self.received[side] == self.sent[self._peer(side)]
 
     @invariant()
+    def early_data_is_delivered_once(self) -> None:
+        """The early-data counters agree with each other and with PROTOCOL.md 13.
+
+        Which bytes arrive, in order and once, is ``delivered_is_prefix_of_sent``'s
+        and the finish's business (the early bytes are the head of ``sent["a"]``);
+        this pins the path they took: a resent or duplicated init never delivers
+        them again, and the connector drops them from its queue exactly when the
+        listener took them."""
+        a, b = self.ep["a"], self.ep["b"]
+        sa, sb = a.statistics(), b.statistics()
+        # Only a connector sends early data; only a listener takes it.
+        assert sb.early_sent == sb.early_delivered == sa.early_received == 0, (sa, sb)
+        bound = min(self.early_queued, a.config.early_data)
+        assert sa.early_sent <= bound, (sa.early_sent, bound)
+        if a.state is not State.IDLE and bound and a.config.init_lanes() is not None:
+            # A connector with XLANES and queued bytes puts some in its init.
+            assert sa.early_sent > 0, (sa, bound)
+        elif a.config.init_lanes() is None:
+            assert sa.early_sent == 0, sa
+        # All or nothing, once: a second delivery would double early_received.
+        assert sa.early_delivered in (0, sa.early_sent), sa
+        assert sb.early_received in (0, sa.early_sent), (sa.early_sent, sb.early_received)
+        assert sb.early_received <= sb.bytes_delivered, sb
+        if sa.early_delivered:
+            # The answer's bit 2 never claims a delivery that did not happen.
+            assert sb.early_received == sa.early_sent, (sa, sb)
+        takes = b.config.expedited and b.config.early_data > 0
+        if not takes:
+            assert sb.early_received == 0, sb
+        elif b.state not in (State.IDLE, State.LISTEN):
+            # B accepted an init; every copy carries the same early bytes.
+            assert sb.early_received == sa.early_sent, (sa, sb)
+        if a.state not in (State.IDLE, State.CONNECTING):
+            # A read the answer: it says delivered exactly when B delivered.
+            assert sa.early_delivered == sb.early_received, (sa, sb)
+
+    @invariant()
     def connection_stays_alive(self) -> None:
         for side in SIDES:
             assert self.ep[side].state not in (State.FAILED, State.DEAD), (
@@ -887,6 +999,7 @@ class ARQMachine(RuleBasedStateMachine):
         self.latest_values_arrive_in_order_at_most_once()
         self.settled_latest_value_was_delivered()
         self.end_of_stream_means_everything_arrived()
+        self.early_data_is_delivered_once()
         self.connection_stays_alive()
         self.accounting_is_consistent()
 
