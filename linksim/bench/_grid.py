@@ -121,6 +121,8 @@ class Point:
         seed: seeds the payload and the line's impairments.
         hints: what both ends are told about the line (:data:`HINTS`):
             ``exact``, ``none`` or one value 10x off.
+        dense: both ends offer the dense encodings (serialsocket/PROTOCOL.md
+            section 10, as the netcat does; the library's default is not to).
         derived_len: the user's default: no length is configured, the
             endpoints measure it (serialsocket/PROTOCOL.md 4.7) starting
             from ``max_len``, the length they derive from their hints, and
@@ -140,6 +142,7 @@ class Point:
     seed: int = 1
     hints: str = "exact"
     derived_len: bool = False
+    dense: bool = False
 
 
 # -- payloads --------------------------------------------------------------------
@@ -380,6 +383,7 @@ def _user_config(point: Point) -> EndpointConfig:
         bits_per_char=BITS_PER_CHAR,
         window=point.window,
         encoding=PROFILES[point.profile],
+        dense=point.dense,
     )
 
 
@@ -407,6 +411,7 @@ def _best_limit(
                     encoding=PROFILES[point.profile],
                     byte_error_rate=point.ber,
                     burst=burst,
+                    dense=point.dense,
                 ),
                 n,
             )
@@ -541,12 +546,13 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
             encoding=encoding,
             byte_error_rate=point.ber,
             burst=burst,
+            dense=point.dense,
         )
     line_bps = point.baud / BITS_PER_CHAR
     # Cap virtual time at 5x the time at the limit, or at 4 stop-and-wait
     # round trips per packet, whichever is longer: a configuration that cannot
     # finish inside that is reported as such, with the goodput it reached.
-    packets = size / packet_sizes(payload, encoding, point.max_len)[0]
+    packets = size / packet_sizes(payload, encoding, point.max_len, point.dense)[0]
     rtt = _round_trip(point.baud, point.delay, point.max_len)
     cap = max(5 * size / limit if limit > 0 else math.inf, 4 * packets * rtt) + 60
     m = simulate(
@@ -561,6 +567,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         seed=point.seed,
         time_cap=cap,
         hints=point.hints,
+        dense=point.dense,
     )
     goodput = m.goodput
     efficiency = goodput / line_bps
@@ -593,6 +600,7 @@ def run_point(point: Point, sweeps: Sequence[str] = ()) -> dict[str, Any]:
         "length_policy": "auto" if point.auto_len else "measured" if point.derived_len else "fixed",
         "start_packet_len": point.max_len,
         "hints": point.hints,
+        "dense": point.dense,
         "time_to_first_byte_s": None
         if m.first_byte_seconds is None
         else round(m.first_byte_seconds, 3),

@@ -126,15 +126,18 @@ class Measurement:
 
 
 @functools.lru_cache(maxsize=64)
-def agreed_parameters(encoding: Encoding, max_len: int) -> Negotiated:
+def agreed_parameters(encoding: Encoding, max_len: int, dense: bool = False) -> Negotiated:
     """What two endpoints configured with this profile and maximum packet
     length agree on, from a real init exchange between two
     :class:`~serialsocket.Endpoint` objects (so the limit follows the
     negotiation, dense encodings and CRC-32 included).  Without long
     sequence numbers: the two characters they add to a data packet are a
     cost of the protocol's choice, as its ACKs are, and the limit is the
-    same whatever the hints made the endpoints choose."""
-    cfg = EndpointConfig(max_packet_length=max_len, encoding=encoding, long_window=None)
+    same whatever the hints made the endpoints choose.  ``dense``: both offer
+    the dense encodings (PROTOCOL.md section 10), as the netcat does."""
+    cfg = EndpointConfig(
+        max_packet_length=max_len, encoding=encoding, long_window=None, dense=dense
+    )
     a, b = Endpoint(cfg), Endpoint(cfg)
     b.listen()
     a.connect(0.0)
@@ -144,7 +147,9 @@ def agreed_parameters(encoding: Encoding, max_len: int) -> Negotiated:
     return a.parameters
 
 
-def packet_sizes(payload: bytes, encoding: Encoding, max_len: int) -> tuple[float, float]:
+def packet_sizes(
+    payload: bytes, encoding: Encoding, max_len: int, dense: bool = False
+) -> tuple[float, float]:
     """Mean payload bytes carried and wire bytes occupied by a full data packet.
 
     ``encoding`` is the endpoints' configured profile; the payload is cut
@@ -153,7 +158,7 @@ def packet_sizes(payload: bytes, encoding: Encoding, max_len: int) -> tuple[floa
     packet is left out unless it is the only one.  Wire bytes count MARK
     through CHECK plus the EOL (CR), i.e. everything the UART clocks out.
     """
-    agreed = agreed_parameters(encoding, max_len)
+    agreed = agreed_parameters(encoding, max_len, dense)
     cap = data_capacity(max_len, agreed.check)
     fields = agreed.encoding.encode_fields(payload, cap, 1 << 30)
     full = fields[:-1] or fields
@@ -202,13 +207,15 @@ def limit_goodput(
     encoding: Encoding,
     byte_error_rate: float,
     burst: GilbertElliott | None = None,
+    dense: bool = False,
 ) -> tuple[float, float]:
-    """The theoretical goodput (module docstring) and the packet error probability.
+    """The theoretical goodput (module docstring) and the packet error probability
+    (``dense``: for the encoding two ends offering the dense ones agree on).
 
     Returns:
         ``(limit in payload bytes/s, probability that a full packet is hit)``.
     """
-    carried, wire = packet_sizes(payload, encoding, max_len)
+    carried, wire = packet_sizes(payload, encoding, max_len, dense)
     p_hit = packet_error_probability(wire, byte_error_rate, burst)
     return rate / BITS_PER_CHAR * carried / wire * (1.0 - p_hit), p_hit
 
@@ -255,6 +262,7 @@ def simulate(
     seed: int,
     time_cap: float,
     hints: str = "exact",
+    dense: bool = False,
 ) -> Measurement:
     """Send ``payload`` from end a to end b over the impaired line; measure it.
 
@@ -287,6 +295,7 @@ def simulate(
         window=window,
         max_packet_length=max_len,
         encoding=encoding,
+        dense=dense,
     )
     size = len(payload)
     a, b = Endpoint(cfg), Endpoint(cfg)

@@ -14,6 +14,7 @@ import argparse
 import json
 import sys
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -204,6 +205,13 @@ def add_goodput_arguments(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--seed", type=SEED, default=1, help="payload and line seed (default 1)")
     ap.add_argument(
+        "--dense",
+        action="store_true",
+        help="both ends offer the dense encodings (escape code, radix 91), as the netcat "
+        "does; the limit is then computed for them (default: the library's classic "
+        "Kermit prefixing)",
+    )
+    ap.add_argument(
         "--jobs", type=JOBS, default=min(2, cpu_count()), help="worker processes (default 2)"
     )
     ap.add_argument("--json", action="store_true", help="print the rows as a JSON array only")
@@ -277,6 +285,8 @@ def goodput_main(args: argparse.Namespace) -> int:
             grid = standard_grid(
                 quick=args.quick, sweeps=args.sweep, size=args.size, seed=args.seed
             )
+        if args.dense:
+            grid = [(replace(p, dense=True), sweeps) for p, sweeps in grid]
         rows = run_grid(grid, jobs=args.jobs, progress=not args.json and sys.stderr.isatty())
     missing = missing_row_keys(rows)
     if missing:

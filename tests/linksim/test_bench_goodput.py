@@ -242,3 +242,28 @@ def test_auto_packet_length_follows_errors_and_window() -> None:
     # window wants long ones.
     assert auto_packet_length(2400, 1.3, 1e-3, window=31) <= 128
     assert auto_packet_length(19200, 1.3, 1e-5, window=31) >= 512
+
+
+def test_dense_points_measure_the_length_and_take_the_limit_at_the_best_one() -> None:
+    """--dense: the ends offer the dense encodings (as the netcat does), the
+    limit is computed for the escape code the 8-bit line agrees on, and a
+    default point (hints, no length) lets the ends measure the length: its
+    limit is the best length they may choose, so the ratio never exceeds 1
+    by choosing better than the start."""
+    from dataclasses import replace
+
+    from linksim.bench import custom_grid
+
+    grid = custom_grid(rates=[9600], delays=[0.27], bers=[0.0], hints=["exact"], size=40_000)
+    assert grid is not None
+    [(point, _)] = grid
+    plain = run_point(replace(point, profile="8bit"))
+    dense = run_point(replace(point, profile="8bit", dense=True))
+    assert (plain["dense"], dense["dense"]) == (False, True)
+    assert (plain["length_policy"], plain["start_packet_len"]) == ("measured", 128)
+    # A clean 9600 bit/s line: the best length within 0.54 s of line is 517.
+    assert dense["max_packet_len"] == plain["max_packet_len"] == 517
+    assert dense["limit_efficiency"] > plain["limit_efficiency"] + 0.2  # 1.01 vs 1.27 per byte
+    for row in (plain, dense):
+        assert row["complete"]
+        assert 0.9 < row["ratio_to_limit"] <= 1.0
