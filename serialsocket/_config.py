@@ -451,9 +451,15 @@ class EndpointConfig:
         """The longest data packet the measured length may reach (PROTOCOL.md
         4.7): ``peer_max``, and with ``max_packet_time`` set and the line's
         ``rate`` known (characters a second), the characters the line carries
-        in that time, but at least the longest normal packet (96)."""
-        if self.max_packet_time is None or rate is None or not math.isfinite(rate):
+        in that time, but at least the longest normal packet (96).  With the
+        rate not known yet, the starting length: nothing says how long a
+        longer packet would hold the line (without hints, 1024-character
+        packets unpaced on a 2400 bit/s line, 20 s one way, timed out in a
+        storm until the rate was measured: 0.49 of the limit)."""
+        if self.max_packet_time is None:
             return peer_max
+        if rate is None or not math.isfinite(rate):
+            return min(peer_max, self.derived_max_packet_length())
         return min(peer_max, max(LADDER[0], int(self.max_packet_time * rate) - 1))
 
     def packet_lengths(self, rate: float | None = None) -> tuple[int, ...]:

@@ -138,6 +138,10 @@ BUFFER_ROUND_TRIPS = LONG_REPAIR_ROUND_TRIPS + 1
 ``Endpoint._size_receive_buffer``): those of the repair horizon, and one for
 data delivered but not yet read."""
 
+PEER_LENGTH_DECAY = 0.98
+"""Per data packet received, the peer's recent longest packet decays by this
+factor towards the packets it sends now: 512 down to 100 in 80 packets."""
+
 OUTAGE_ROUND_TRIPS = 2
 """Once the round trip is measured, ``dead_after`` rides out an outage of this
 many measured round trips, plus two retransmission timeouts to repair it."""
@@ -303,10 +307,11 @@ class Endpoint:
     """The data packet length is measured (no ``max_packet_length``)."""
     _length: LengthChooser
     _peer_length: int
+    """The peer's recent longest data packet, decaying by 2 % a packet (our
+    starting length until its first; at least 96): what our ACKs may wait
+    behind in its queue."""
     _mean_wire: float
     """Wire bytes of recent new data packets (a moving mean over about eight)."""
-    """The longest data packet the peer has sent us (at least our starting
-    length): what our ACKs may wait behind in its queue."""
     _buffer_capped: bool
     _tune_at: float
     _tune_taken: int
@@ -1448,7 +1453,8 @@ class Endpoint:
         self._peer_data_seen = True
         # MARK, LEN, SEQ, TYPE, the long header's three and a CRC-16: the
         # peer's packet about as long as it was on the line.
-        if (wire := len(data) + 10) > self._peer_length:
+        wire = max(len(data) + 10, int(self._peer_length * PEER_LENGTH_DECAY), LADDER[0])
+        if wire != self._peer_length:
             self._peer_length = wire
             self._length_changed()
             self._fit_receive_window()
@@ -1889,11 +1895,13 @@ class Endpoint:
         if srtt is None:
             # A listener that heard the connector's init again and again after
             # answering knows the round trip is longer than that span, maybe
-            # twice as long (the connector doubles its wait, and a damaged
-            # copy hides one step): at 60 s one way without hints, the copies
-            # came 31 s apart, one was damaged, and a 60 s verdict ended the
-            # link 60 s before the connector's first data could arrive.
-            unmeasured = UNMEASURED_DEAD_AFTER + 2 * self._answer_span
+            # twice as long, and the connector doubles its wait: the next copy
+            # comes a span later, three spans if one copy is damaged.  At 60 s
+            # one way without hints the copies came 31 s apart, one was
+            # damaged, and a 60 s verdict ended the link 60 s before the
+            # connector's first data could arrive; at 300 s, with twice the
+            # span, one damaged copy ended it 6 s before the next.
+            unmeasured = UNMEASURED_DEAD_AFTER + 4 * self._answer_span
             return base if cfg.dead_after is not None else max(base, unmeasured)
         return max(base, OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout())
 
@@ -1938,12 +1946,16 @@ class Endpoint:
         self._receiver.receive_buffer = max(self._receiver.receive_buffer, want)
 
     def _fit_receive_window(self) -> None:
-        """Count the advertised window in packets as long as the peer's longest
-        so far (at least the starting length), not our receive limit: with
-        1024 announced and 128-character packets arriving, a 64 KiB buffer
-        offered 64 packets, and a 20 s line without hints ran at half speed.
-        A measuring peer at most doubles its length a step; a packet the
-        buffer cannot take is dropped, counted, and resent."""
+        """Count the advertised window in packets as long as the peer's recent
+        longest, not as long as our receive limit: with 1024 announced and
+        128-character packets arriving, a 64 KiB buffer offered 64 packets,
+        and a 20 s line without hints ran at half speed.  Recent: the peer's
+        first round trip of 512-character packets, cut to 96 after, held a
+        20 s line to a fifth of its window (0.55 of the limit where fixed
+        lengths made 0.97).  Not twice it, though a measuring peer may double
+        its length in a step: at 300 s without hints that halved the window
+        while the buffer was still the default.  A packet the buffer cannot
+        take is dropped, counted, and resent."""
         agreed = self._negotiated
         if agreed is not None:
             longest = min(self._peer_length, agreed.receive_max_length)

@@ -175,3 +175,17 @@ def test_split_packets_sees_every_data_packet() -> None:
     assert all(p.endswith(b"\r") for _, p in link.sent["ab"])
     assert split_packets(b"".join(p for _, p in link.sent["ab"])) == [p for _, p in link.sent["ab"]]
     assert isinstance(link, SimLink)
+
+
+def test_the_cap_holds_before_the_rate_is_known() -> None:
+    """Without hints nothing says how long a packet holds the line until the
+    ACK clock measures it: the length stays at the start.  It grew to 1024
+    unpaced on a 2400 bit/s line, and at 20 s one way the timeouts stormed
+    until the rate was measured (0.49 of the limit)."""
+    assert EndpointConfig().measured_length_cap(1024, None) == 128
+    assert EndpointConfig(max_packet_time=None).measured_length_cap(1024, None) == 1024
+    assert EndpointConfig().measured_length_cap(1024, 960.0) == 517
+    assert EndpointConfig().measured_length_cap(1024, 30.0) == 96
+    a, link = _transfer(EndpointConfig(), 12_000)
+    assert max(len(p) for _, p in link.sent["ab"]) <= 129
+    assert a.statistics().packet_length <= 128
