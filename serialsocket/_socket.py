@@ -17,6 +17,13 @@ Failures reach the application as ``trio.BrokenResourceError`` whose
 packet, with its reason), :class:`LinkDeadError` (silence; with the bytes
 acknowledged, in flight and never sent) or :class:`LineFailed` (the port
 itself failed or reached EOF).
+
+A *deferred* socket (``connect(port, defer=True)``) is a client session whose
+connection request has not gone out yet: the first ``send_all`` queues its
+bytes and sends the request with the first of them inside (early data,
+PROTOCOL.md section 13), as TCP Fast Open's connect-on-first-send does.
+Until the connection is established the session raises the connect's own
+failure (chained to ``BrokenResourceError``) from whichever call meets it.
 """
 
 from __future__ import annotations
@@ -53,6 +60,13 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+_REQUEST_GRACE = 0.05
+"""Seconds a deferred socket's first receive waits for a first write before it
+sends the connection request itself (empty).  Long enough for a sender started
+beside the receiver (tcpstream's reader and writer start together) to be
+scheduled on a loaded machine; short against any link where deferring pays
+(a round trip of a tenth of a second or more)."""
+
 
 class SerialSocket(trio.abc.HalfCloseableStream):
     """A connected serial socket: reliable, sequenced, full duplex.
@@ -63,10 +77,22 @@ class SerialSocket(trio.abc.HalfCloseableStream):
     ``send_eof`` the peer sees EOF once every byte before it arrived;
     ``aclose`` closes gracefully -- for as long as the close makes progress,
     giving up after ``close_timeout`` without any -- and, if cancelled, aborts.
+    A socket from ``connect(..., defer=True)`` connects on its first write
+    (see :func:`connect`).
     """
 
-    def __init__(self, driver: _Driver, *, close_timeout: float | None) -> None:
+    def __init__(
+        self, driver: _Driver, *, close_timeout: float | None, deferred: bool = False
+    ) -> None:
         self._d = driver
+        self._deferred = deferred
+        """Made by ``connect(defer=True)``: until established, calls wait for
+        the connection and raise its failure as :func:`connect` would."""
+        self._unrequested = deferred
+        """Deferred, and the connection request has not gone out yet."""
+        self._request_by: float | None = None
+        """When a waiting receive sends the deferred request itself (fixed by
+        the first one to wait, so a retried receive does not postpone it)."""
         self._generation = driver.generation
         self._closed = False
         self._eof_sent = False
@@ -119,7 +145,54 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         if self._closed or self._generation != self._d.generation:
             raise trio.ClosedResourceError("this serial socket was closed")
 
+    def _connecting(self) -> bool:
+        """A deferred connection not yet established (requested or not)."""
+        return self._deferred and self._d.ep.parameters is None
+
+    def _request(self) -> None:
+        """Send the deferred connection request now, carrying the head of the
+        send queue as early data; nothing once it went."""
+        if self._unrequested:
+            self._unrequested = False
+            d = self._d
+            d.ep.connect(d.now())
+            d.notify()
+
+    def _raise_if_connect_failed(self) -> None:
+        """A deferred connection that failed before it was established: raise
+        what :func:`connect` raises, chained to BrokenResourceError."""
+        if not self._connecting():
+            return
+        d = self._d
+        if d.ep.state in TERMINAL or d.broken is not None or d.stopped:
+            cause = _connect_failure(d)
+            raise trio.BrokenResourceError(str(cause)) from cause
+
+    async def _wait(self) -> None:
+        """Wait for the next change.  An unrequested deferred socket waits at
+        most until :data:`_REQUEST_GRACE` after the first such wait, then
+        sends its connection request (without early data)."""
+        if not self._unrequested:
+            await self._d.changed()
+            return
+        if self._request_by is None:
+            self._request_by = trio.current_time() + _REQUEST_GRACE
+        with trio.move_on_at(self._request_by):
+            await self._d.changed()
+            return
+        self._request()
+
+    async def _established(self) -> None:
+        """Send a deferred request if it has not gone, and wait for the
+        connection (bounded by the connect timeout); raise its failure."""
+        self._request()
+        while self._connecting():
+            self._check_open()
+            self._raise_if_connect_failed()
+            await self._d.changed()
+
     def _raise_if_broken(self) -> None:
+        self._raise_if_connect_failed()
         d = self._d
         if d.broken is not None:
             raise trio.BrokenResourceError(str(d.broken)) from d.broken
@@ -132,11 +205,17 @@ class SerialSocket(trio.abc.HalfCloseableStream):
     async def send_all(self, data: bytes | bytearray | memoryview) -> None:
         """Queue all of ``data`` for reliable delivery; returns once it is queued.
 
+        On a deferred socket the first (non-empty) call sends the connection
+        request, carrying the first of ``data`` as early data, and returns
+        without waiting for the answer.
+
         Raises:
             trio.BusyResourceError: another task is already sending.
             trio.ClosedResourceError: this socket was closed or ``send_eof``
                 was called.
-            trio.BrokenResourceError: the connection failed (see the cause).
+            trio.BrokenResourceError: the connection failed (see the cause;
+                for a deferred connection that was never established, what
+                :func:`connect` raises).
         """
         with self._send_guard():
             self._check_open()
@@ -152,6 +231,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                         taken = self._d.ep.send(view, self._d.now())
                     except LocalProtocolError as exc:
                         raise trio.BrokenResourceError(str(exc)) from exc
+                    self._request()  # deferred: the request carries the head of them
                     if taken:
                         view = view[taken:]
                         self._d.notify()
@@ -165,12 +245,16 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             await trio.lowlevel.checkpoint()
             while True:
                 self._check_open()
-                if self._d.broken is not None or self._d.ep.send_buffer_free > 0:
+                ep = self._d.ep
+                if self._d.broken is not None or ep.state in TERMINAL or ep.send_buffer_free > 0:
                     return
                 await self._d.changed()
 
     async def send_eof(self) -> None:
-        """Half-close: the peer reads EOF after every byte sent so far."""
+        """Half-close: the peer reads EOF after every byte sent so far.
+
+        On a deferred socket not yet connecting, this sends the connection
+        request (the EOF follows once connected)."""
         with self._send_guard():
             self._check_open()
             await trio.lowlevel.checkpoint()
@@ -179,17 +263,24 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self._raise_if_broken()
             self._eof_sent = True
             self._d.ep.send_eof(self._d.now())
+            self._request()
             self._d.notify()
 
     async def receive_some(self, max_bytes: int | None = None) -> bytes:
         """Bytes from the peer, in order, each exactly once; ``b""`` only at EOF.
 
+        On a deferred socket this waits for the connection as well (see
+        :func:`connect`); one that has not sent its request yet sends it a
+        moment (50 ms) after the first receive began, if no write came first.
+
         Raises:
             trio.BusyResourceError: another task is already receiving.
             trio.ClosedResourceError: this socket was closed (also wakes a
                 blocked receive).
-            trio.BrokenResourceError: the connection failed (see the cause);
-                bytes delivered before the failure are returned first.
+            trio.BrokenResourceError: the connection failed (see the cause;
+                for a deferred connection that was never established, what
+                :func:`connect` raises); bytes delivered before the failure
+                are returned first.
         """
         if max_bytes is not None:
             max_bytes = operator.index(max_bytes)  # TypeError for 1.5, as trio requires
@@ -213,7 +304,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 if self._d.ep.at_eof:
                     return b""
                 self._raise_if_broken()
-                await self._d.changed()
+                await self._wait()
         finally:
             self._receiving = False
 
@@ -222,7 +313,17 @@ class SerialSocket(trio.abc.HalfCloseableStream):
     @property
     def expedited(self) -> bool:
         """Both ends agreed on the expedited lane: :meth:`send_expedited` and
-        :meth:`receive_expedited` work (False with a classic or older peer)."""
+        :meth:`receive_expedited` work (False with a classic or older peer).
+
+        A deferred socket not yet connected says whether it asks for the lane
+        (``EndpointConfig.expedited``): a stream user such as tcpstream
+        decides at its start whether to use the lane, before the answer can
+        be known, and :meth:`send_expedited` waits for the connection.  So a
+        True here may still end without a lane (a classic peer); tcpstream
+        sends on the lane only when its own peer says it reads it, and that
+        peer's socket knows the agreed lanes."""
+        if self._connecting() and self._d.ep.state not in TERMINAL:
+            return self._d.ep.config.expedited
         return self._d.ep.expedited
 
     async def send_expedited(self, message: bytes | bytearray | memoryview) -> None:
@@ -233,7 +334,8 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         the peer's :meth:`receive_expedited` whole and exactly once.  It is
         not ordered with the stream: it overtakes data sent before it.
         Waits (cancellably) while the lane already holds its limit of
-        unacknowledged messages.
+        unacknowledged messages, and on a deferred socket for the connection
+        (sending its request if it has not gone).
 
         Raises:
             trio.ClosedResourceError: this socket was closed.
@@ -243,6 +345,8 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 bytes at most, and 31 packets at the negotiated length).
         """
         await trio.lowlevel.checkpoint()
+        self._check_open()
+        await self._established()
         while True:
             self._check_open()
             self._raise_if_broken()
@@ -272,14 +376,17 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self._raise_if_broken()
             if (over := self._d.ep.expedited_over) is not None:
                 raise trio.BrokenResourceError(over)
-            await self._d.changed()
+            await self._wait()
 
     # -- the latest-value lane (PROTOCOL.md section 12) ---------------------------
 
     @property
     def latest(self) -> bool:
         """Both ends agreed on the latest-value lane: :meth:`send_latest` and
-        :meth:`receive_latest` work (False with a classic or older peer)."""
+        :meth:`receive_latest` work (False with a classic or older peer).
+
+        False on a deferred socket until it is connected: :meth:`send_latest`
+        never waits, so it cannot hold a value for a connection not yet made."""
         return self._d.ep.latest
 
     def send_latest(self, value: bytes | bytearray | memoryview) -> None:
@@ -328,7 +435,7 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self._raise_if_broken()
             if (over := self._d.ep.latest_over) is not None:
                 raise trio.BrokenResourceError(over)
-            await self._d.changed()
+            await self._wait()
 
     async def aclose(self) -> None:
         """Close gracefully: all our data acknowledged, both EOFs exchanged.
@@ -347,6 +454,13 @@ class SerialSocket(trio.abc.HalfCloseableStream):
         streams do not; a program whose exit status means "delivered" checks
         it, as the netcat does.  If cancelled, the connection is aborted (and
         ``Cancelled`` propagates).  Idempotent.
+
+        A deferred socket whose request has not gone out sends nothing: the
+        port closes at once (:attr:`close_error` None: it was given nothing
+        to deliver).  One whose request went out waits for the connection
+        (bounded by the connect timeout) and then closes gracefully, so what
+        was written is delivered as after :func:`connect`; if the connection
+        fails, :attr:`close_error` says so.
         """
         if self._closed:
             await trio.lowlevel.checkpoint()
@@ -360,8 +474,19 @@ class SerialSocket(trio.abc.HalfCloseableStream):
             self.close_error = self._final
             return
         d.notify()  # wake our own blocked receive/send: they now raise Closed
+        if self._unrequested:
+            # Deferred and never requested: the peer knows nothing of us.
+            try:
+                await trio.lowlevel.checkpoint()
+            finally:
+                await d.stop()
+            return
         try:
             await trio.lowlevel.checkpoint()
+            # A deferred connection still being made ends (the endpoint's
+            # connect deadline) or comes up; then it is closed like any other.
+            while d.ep.state is State.CONNECTING and d.broken is None and not d.stopped:
+                await d.changed()
             if d.ep.state is State.ESTABLISHED and d.broken is None:
                 d.ep.close(d.now(), patience=self.close_timeout)
                 d.notify()
@@ -383,7 +508,10 @@ class SerialSocket(trio.abc.HalfCloseableStream):
                 await d.stop()
             else:
                 d.notify()
-        self.close_error = _ending(d)
+        failed = self._deferred and d.ep.parameters is None  # never connected
+        self.close_error = _ending(
+            d, f"connecting failed: {_connect_failure(d)}" if failed else None
+        )
 
 
 class SerialListener(trio.abc.Listener[SerialSocket]):
@@ -479,6 +607,7 @@ async def connect(
     *,
     nursery: trio.Nursery | None = None,
     early_data: bytes | bytearray | memoryview = b"",
+    defer: bool = False,
 ) -> SerialSocket:
     """Connect over ``port`` and return the socket (the port now belongs to it).
 
@@ -493,15 +622,44 @@ async def connect(
     listener does not take early data, follow as ordinary data.  Delivered
     exactly once and before anything sent later.
 
+    ``defer=True`` connects on the first write instead (TCP Fast Open's
+    connect-on-first-send), for a caller whose first bytes are not known
+    until it has the socket -- a session layer such as tcpstream writing its
+    HELLO.  The socket is returned at once, nothing sent; then:
+
+    * the first non-empty ``send_all`` queues its bytes and sends the
+      connection request with the first of them as early data (as
+      ``early_data`` above), and returns once they are queued, as always;
+      ``send_eof`` and ``send_expedited`` send the request too (the latter
+      then waits for the connection: the lane needs it);
+    * ``receive_some`` (and the lanes' receives) wait for the connection; one
+      that began before any write sends the request itself, without early
+      data, a moment (50 ms) later;
+    * the connect timeout counts from the request.  If the connection fails,
+      the next operation (or the one waiting) raises
+      ``trio.BrokenResourceError`` whose ``__cause__`` is what this function
+      raises without ``defer``: ``ConnectionRefusedError``,
+      ``TimeoutError``, or the port's :class:`LineFailed`;
+    * ``aclose`` before the request sends nothing and closes the port; after
+      it, waits for the connection and closes gracefully;
+    * every wait is cancellable, and a cancelled one leaves the socket as it
+      was (a request sent stays sent; a cancelled ``aclose`` aborts);
+    * :attr:`SerialSocket.expedited` says until then what this side asks for.
+
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
         TimeoutError: no answer within the connect timeout.
         trio.BrokenResourceError: the port failed while connecting.
-        ValueError: ``early_data`` is larger than the send buffer.
+        ValueError: ``early_data`` is larger than the send buffer, or given
+            with ``defer`` (write the bytes instead).
     """
     cfg = (config or EndpointConfig()).for_line(port)  # 8N1 port: 8-bit profile
     cfg.check_early_data(early_data)
+    if defer and early_data:
+        raise ValueError("early_data with defer=True: send the bytes with send_all instead")
     driver = await _start_driver(port, cfg, nursery)
+    if defer:
+        return SerialSocket(driver, close_timeout=_close_timeout(cfg), deferred=True)
     driver.ep.send(early_data, driver.now())
     driver.ep.connect(driver.now())
     driver.notify()
@@ -549,6 +707,16 @@ async def accept(
         raise
 
 
+def _connect_failure(driver: _Driver) -> Exception:
+    """Why a connection request failed: what :func:`connect` raises, or
+    chains to the BrokenResourceError it raises."""
+    if isinstance(driver.broken, LineFailed):
+        return driver.broken
+    if driver.stopped and driver.broken is None and driver.ep.state not in TERMINAL:
+        return LineFailed("the serial socket stopped before it was connected")
+    return _connect_error(driver)
+
+
 def _connect_error(driver: _Driver) -> Exception:
     if isinstance(driver.broken, PeerAborted):
         return ConnectionRefusedError(f"connection refused: {driver.broken.reason}")
@@ -564,11 +732,12 @@ async def open_serial_socket(
     config: EndpointConfig | None = None,
     *,
     early_data: bytes | bytearray | memoryview = b"",
+    defer: bool = False,
 ) -> AsyncIterator[SerialSocket]:
     """``async with open_serial_socket(port) as sock:`` -- connect, use, close
-    (``early_data`` as for :func:`connect`)."""
+    (``early_data`` and ``defer`` as for :func:`connect`)."""
     async with trio.open_nursery() as nursery:
-        sock = await connect(port, config, nursery=nursery, early_data=early_data)
+        sock = await connect(port, config, nursery=nursery, early_data=early_data, defer=defer)
         try:
             yield sock
         finally:

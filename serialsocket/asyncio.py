@@ -81,6 +81,10 @@ log = logging.getLogger(__name__)
 PortLike = AsyncPort | str
 """A port object, or a device path / pyserial URL to open (at ``baud``)."""
 
+_REQUEST_GRACE = 0.05
+"""Seconds a deferred socket's first read waits for a first write before it
+sends the connection request itself (as the trio socket's)."""
+
 
 class AsyncioSerialSocket:
     """A connected serial socket for asyncio: reliable, sequenced, full duplex.
@@ -90,11 +94,22 @@ class AsyncioSerialSocket:
     the peer's EOF; after ``write_eof`` the peer sees EOF once every byte
     before it arrived; ``close`` closes gracefully -- for as long as the close
     makes progress, giving up after ``close_timeout`` without any -- and a
-    cancelled ``wait_closed``/``aclose`` aborts.
+    cancelled ``wait_closed``/``aclose`` aborts.  A socket from
+    ``connect(..., defer=True)`` connects on its first write (see
+    :func:`connect`).
     """
 
-    def __init__(self, driver: AsyncioDriver, *, close_timeout: float | None) -> None:
+    def __init__(
+        self, driver: AsyncioDriver, *, close_timeout: float | None, deferred: bool = False
+    ) -> None:
         self._d = driver
+        self._deferred = deferred
+        """Made by ``connect(defer=True)``: until established, calls wait for
+        the connection and raise its failure as :func:`connect` would."""
+        self._unrequested = deferred
+        """Deferred, and the connection request has not gone out yet."""
+        self._request_by: float | None = None
+        """When a waiting read sends the deferred request itself."""
         self._generation = driver.generation
         self._reading = False
         self._eof_written = False
@@ -135,7 +150,56 @@ class AsyncioSerialSocket:
         if self._closing is not None or not self._current():
             raise RuntimeError("this serial socket was closed")
 
+    def _connecting(self) -> bool:
+        """A deferred connection not yet established (requested or not)."""
+        return self._deferred and self._d.ep.parameters is None
+
+    def _request(self) -> None:
+        """Send the deferred connection request now, carrying the head of what
+        was written as early data; nothing once it went."""
+        if self._unrequested:
+            self._unrequested = False
+            d = self._d
+            d.feed()  # the bytes written so far go into the endpoint: the init takes its head
+            d.ep.connect(d.now())
+            d.notify()
+
+    def _raise_if_connect_failed(self) -> None:
+        """A deferred connection that failed before it was established: raise
+        what :func:`connect` raises, chained to ConnectionError."""
+        d = self._d
+        if self._connecting() and (d.ep.state in TERMINAL or d.broken is not None or d.stopped):
+            cause = _connect_failure(d)
+            raise ConnectionError(str(cause)) from cause
+
+    async def _wait(self) -> None:
+        """Wait for the next change.  An unrequested deferred socket waits at
+        most until ``_REQUEST_GRACE`` after the first such wait, then sends
+        its connection request (without early data)."""
+        d = self._d
+        if not self._unrequested:
+            await d.changed()
+            return
+        if self._request_by is None:
+            self._request_by = d.now() + _REQUEST_GRACE
+        try:
+            async with asyncio.timeout_at(self._request_by):
+                await d.changed()
+                return
+        except TimeoutError:
+            self._request()
+
+    async def _established(self) -> None:
+        """Send a deferred request if it has not gone, and wait for the
+        connection (bounded by the connect timeout); raise its failure."""
+        self._request()
+        while self._connecting():
+            self._check_open()
+            self._raise_if_connect_failed()
+            await self._d.changed()
+
     def _raise_if_broken(self) -> None:
+        self._raise_if_connect_failed()
         d = self._d
         if d.broken is not None:
             raise ConnectionError(str(d.broken)) from d.broken
@@ -148,11 +212,15 @@ class AsyncioSerialSocket:
     async def read(self, n: int = -1) -> bytes:
         """Up to ``n`` bytes from the peer, in order, each exactly once; ``b""`` only at EOF.
 
-        ``n = -1`` reads until EOF (as ``asyncio.StreamReader.read``).
+        ``n = -1`` reads until EOF (as ``asyncio.StreamReader.read``).  On a
+        deferred socket this waits for the connection as well (see
+        :func:`connect`).
 
         Raises:
-            ConnectionError: the connection failed (see ``__cause__``); bytes
-                delivered before the failure are returned first.
+            ConnectionError: the connection failed (see ``__cause__``; for a
+                deferred connection that was never established, what
+                :func:`connect` raises); bytes delivered before the failure
+                are returned first.
             RuntimeError: the socket was closed (also wakes a blocked read),
                 or another task is already reading.
         """
@@ -179,7 +247,7 @@ class AsyncioSerialSocket:
                 if d.ep.at_eof:
                     return b""
                 self._raise_if_broken()
-                await d.changed()
+                await self._wait()
         finally:
             self._reading = False
 
@@ -204,6 +272,9 @@ class AsyncioSerialSocket:
     def write(self, data: bytes | bytearray | memoryview) -> None:
         """Queue ``data`` for reliable delivery (never blocks; ``drain`` waits for room).
 
+        On a deferred socket the first (non-empty) write sends the connection
+        request, carrying the first of ``data`` as early data.
+
         Raises:
             ConnectionError: the connection already failed.
             RuntimeError: the socket was closed, or ``write_eof`` was called.
@@ -214,6 +285,7 @@ class AsyncioSerialSocket:
         self._raise_if_broken()
         if data:
             self._d.outbox += data
+            self._request()
             self._d.notify()
 
     def get_write_buffer_size(self) -> int:
@@ -244,18 +316,27 @@ class AsyncioSerialSocket:
 
     @property
     def expedited(self) -> bool:
-        """Both ends agreed on the expedited lane (False with a classic or older peer)."""
+        """Both ends agreed on the expedited lane (False with a classic or older peer).
+
+        A deferred socket not yet connected says whether it asks for the lane,
+        as ``SerialSocket.expedited`` does (:meth:`send_expedited` waits for
+        the connection)."""
+        if self._connecting() and self._d.ep.state not in TERMINAL:
+            return self._d.ep.config.expedited
         return self._d.ep.expedited
 
     async def send_expedited(self, message: bytes | bytearray | memoryview) -> None:
         """Send one small urgent message ahead of every byte queued on the stream
-        (see ``SerialSocket.send_expedited``); waits while the lane is full.
+        (see ``SerialSocket.send_expedited``); waits while the lane is full, and
+        on a deferred socket for the connection.
 
         Raises:
             ConnectionError: the connection failed or has no lane.
             RuntimeError: the socket was closed.
             ValueError: ``message`` is empty or too long for the lane.
         """
+        self._check_open()
+        await self._established()
         while True:
             self._check_open()
             self._raise_if_broken()
@@ -284,13 +365,14 @@ class AsyncioSerialSocket:
             self._raise_if_broken()
             if (over := self._d.ep.expedited_over) is not None:
                 raise ConnectionError(over)
-            await self._d.changed()
+            await self._wait()
 
     # -- the latest-value lane (PROTOCOL.md section 12) ------------------------
 
     @property
     def latest(self) -> bool:
-        """Both ends agreed on the latest-value lane (False with a classic or older peer)."""
+        """Both ends agreed on the latest-value lane (False with a classic or older
+        peer, and on a deferred socket until it is connected)."""
         return self._d.ep.latest
 
     def send_latest(self, value: bytes | bytearray | memoryview) -> None:
@@ -326,7 +408,7 @@ class AsyncioSerialSocket:
             self._raise_if_broken()
             if (over := self._d.ep.latest_over) is not None:
                 raise ConnectionError(over)
-            await self._d.changed()
+            await self._wait()
 
     def can_write_eof(self) -> bool:
         return True
@@ -339,6 +421,7 @@ class AsyncioSerialSocket:
         self._raise_if_broken()
         self._eof_written = True
         self._d.eof_requested = True
+        self._request()
         self._d.notify()
 
     async def wait_acknowledged(self) -> None:
@@ -391,6 +474,11 @@ class AsyncioSerialSocket:
         the link is judged dead.  Afterwards :attr:`close_error` is None
         exactly when every byte was delivered both ways; ``aclose`` does not
         raise for it.  If cancelled, the connection is aborted.  Idempotent.
+
+        A deferred socket whose request has not gone out sends nothing (its
+        port closes at once, :attr:`close_error` None); one whose request
+        went out waits for the connection (bounded by the connect timeout),
+        then closes gracefully.
         """
         self.close()
         await self.wait_closed()
@@ -424,10 +512,18 @@ class AsyncioSerialSocket:
             # it is not ours to close.  How ours ended was recorded then.
             self.close_error = self._final
             return
+        if self._unrequested:
+            # Deferred and never requested: the peer knows nothing of us.
+            await d.stop()
+            return
         try:
             if not graceful:
                 self._abort_now(reason)
-            elif d.ep.state is State.ESTABLISHED and d.broken is None:
+            # A deferred connection still being made ends (the endpoint's
+            # connect deadline) or comes up; then it is closed like any other.
+            while d.ep.state is State.CONNECTING and d.broken is None and not d.stopped:
+                await d.changed()
+            if d.ep.state is State.ESTABLISHED and d.broken is None:
                 await self._hand_over_outbox()
                 if d.ep.state is State.ESTABLISHED and d.broken is None:
                     d.ep.close(d.now(), patience=self.close_timeout)
@@ -444,7 +540,10 @@ class AsyncioSerialSocket:
                 await d.stop()
             else:
                 d.notify()
-        self.close_error = ending(d.ep, d.outcome.describe(d.ep, stopped=d.stopped))
+        if self._deferred and d.ep.parameters is None:  # never connected
+            self.close_error = ending(d.ep, f"connecting failed: {_connect_failure(d)}")
+        else:
+            self.close_error = ending(d.ep, d.outcome.describe(d.ep, stopped=d.stopped))
 
     async def _hand_over_outbox(self) -> None:
         """Before the endpoint's close: get what ``write`` buffered into the endpoint,
@@ -558,6 +657,16 @@ async def _port(port: PortLike, baud: int) -> tuple[AsyncPort, bool]:
     return port, False
 
 
+def _connect_failure(d: AsyncioDriver) -> Exception:
+    """Why a connection request failed: what :func:`connect` raises, or
+    chains to the ConnectionError it raises."""
+    if isinstance(d.broken, LineFailed):
+        return d.broken
+    if d.stopped and d.broken is None and d.ep.state not in TERMINAL:
+        return LineFailed("the serial socket stopped before it was connected")
+    return _connect_error(d)
+
+
 def _connect_error(d: AsyncioDriver) -> Exception:
     if isinstance(d.broken, PeerAborted):
         return ConnectionRefusedError(f"connection refused: {d.broken.reason}")
@@ -573,6 +682,7 @@ async def connect(
     *,
     baud: int = 9600,
     early_data: bytes | bytearray | memoryview = b"",
+    defer: bool = False,
 ) -> AsyncioSerialSocket:
     """Connect over ``port`` and return the socket (the port now belongs to it).
 
@@ -586,19 +696,36 @@ async def connect(
     after the handshake's round trip; the rest, or all of them if the
     listener does not take early data, follow as ordinary data.  Delivered
     exactly once and before anything sent later.
+
+    ``defer=True`` connects on the first write instead, as the trio
+    ``serialsocket.connect`` does (its docstring has the whole contract): the
+    socket is returned at once, nothing sent; the first non-empty ``write``
+    sends the connection request with the first bytes inside; ``read``
+    waits for the connection (one that began before any write sends the
+    request itself a moment, 50 ms, later); a failed connection raises
+    ``ConnectionError`` whose ``__cause__`` is what this function raises
+    without ``defer``, from the next call or the one waiting; closing before
+    the request sends nothing; every wait is cancellable and leaves the
+    socket usable.
+
     Raises:
         ConnectionRefusedError: the peer refused, with its reason.
         TimeoutError: no answer within the connect timeout.
         ConnectionError: the port failed while connecting.
         OSError: a path or URL could not be opened.
-        ValueError: ``early_data`` is larger than the send buffer.
+        ValueError: ``early_data`` is larger than the send buffer, or given
+            with ``defer`` (write the bytes instead).
     """
     (config or EndpointConfig()).check_early_data(early_data)
+    if defer and early_data:
+        raise ValueError("early_data with defer=True: write the bytes instead")
     line, _ = await _port(port, baud)
     cfg = (config or EndpointConfig()).for_line(line)  # 8N1 port: 8-bit profile
     d = AsyncioDriver(line, Endpoint(cfg), owns_port=True)
     try:
         d.start()
+        if defer:
+            return AsyncioSerialSocket(d, close_timeout=_close_timeout(cfg), deferred=True)
         d.ep.send(early_data, d.now())
         d.ep.connect(d.now())
         d.notify()
@@ -653,14 +780,15 @@ async def accept(
 
 @asynccontextmanager
 async def open_serial_socket(
-    port: PortLike, config: EndpointConfig | None = None, *, baud: int = 9600
+    port: PortLike, config: EndpointConfig | None = None, *, baud: int = 9600, defer: bool = False
 ) -> AsyncIterator[AsyncioSerialSocket]:
-    """``async with open_serial_socket(port) as sock:`` -- connect, use, close.
+    """``async with open_serial_socket(port) as sock:`` -- connect, use, close
+    (``defer`` as for :func:`connect`).
 
     Closed gracefully when the block ends normally, aborted (with a bounded
     wait for the E packet) when it ends with an exception or a cancellation.
     """
-    sock = await connect(port, config, baud=baud)
+    sock = await connect(port, config, baud=baud, defer=defer)
     async with sock:
         yield sock
 
@@ -714,7 +842,7 @@ async def serve(
 
 
 async def open_connection(
-    port: PortLike, config: EndpointConfig | None = None, *, baud: int = 9600
+    port: PortLike, config: EndpointConfig | None = None, *, baud: int = 9600, defer: bool = False
 ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     """Connect and return an ``asyncio`` (reader, writer) pair over the serial socket.
 
@@ -723,6 +851,8 @@ async def open_connection(
     the serial socket gracefully, ``writer.write_eof()`` half-closes and
     ``writer.transport.abort()`` aborts; ``writer.get_extra_info("socket")``
     is the :class:`AsyncioSerialSocket` (its statistics, its close_error).
+    ``defer=True`` (see :func:`connect`) lets the first bytes written -- a
+    tcpstream HELLO -- ride in the connection request.
     """
-    sock = await connect(port, config, baud=baud)
+    sock = await connect(port, config, baud=baud, defer=defer)
     return streams_over(sock)

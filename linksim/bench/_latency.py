@@ -219,7 +219,7 @@ async def _measure_serial(
     ):
         nursery.start_soon(arm_side, listener)
         nursery.start_soon(_echo_handler, echo_b)
-        sock = await serialsocket.connect(ctl_port, config, nursery=nursery)
+        sock = await serialsocket.connect(ctl_port, config, nursery=nursery, defer=True)
         async with sock, connect_stream(sock, identity="bench", key=key) as arm:
             samples = await _alternate(arm.status, _trio_echo(echo_a), count, warmup, block)
         nursery.cancel_scope.cancel()
@@ -363,7 +363,7 @@ async def _trio_client(
     config = serialsocket.EndpointConfig()
     echo_port = await serialsocket.open_port(echo)
     async with echo_port, trio.open_nursery() as nursery:
-        sock = await serialsocket.connect(await serialsocket.open_port(arm), config)
+        sock = await serialsocket.connect(await serialsocket.open_port(arm), config, defer=True)
         async with sock, connect_stream(sock, identity="bench", key=key) as client:
             samples = await _alternate(client.status, _trio_echo(echo_port), count, warmup, block)
         nursery.cancel_scope.cancel()

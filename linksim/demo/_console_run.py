@@ -336,7 +336,8 @@ async def _real_session(
     port = await serialsocket.open_port(options.port, options.baud)
     if options.dial:
         await serialsocket.dial(port, options.dial)
-    sock = await serialsocket.connect(port, endpoint)
+    # Deferred: the HELLO rides in the connection request (a round trip saved).
+    sock = await serialsocket.connect(port, endpoint, defer=True)
     try:
         async with connect_stream(
             sock, identity=IDENTITY, key=demo.key, observer=options.observer

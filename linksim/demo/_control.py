@@ -121,7 +121,9 @@ async def _control_session(
         port = await serialsocket.open_port(where.port, where.baud)
         if where.dial:
             await serialsocket.dial(port, where.dial)
-        sock = await serialsocket.connect(port, endpoint)
+        # Deferred: the connection request goes out with the session's HELLO
+        # inside (early data), a round trip sooner than connecting first.
+        sock = await serialsocket.connect(port, endpoint, defer=True)
         try:
             async with connect_stream(sock, identity=IDENTITY, key=key) as arm:
                 await drive(arm, run, options, lambda: serial_link_figures(sock), title)

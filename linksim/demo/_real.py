@@ -257,13 +257,19 @@ async def _serial(options: DemoOptions, key: bytes, holder: dict[str, Any]) -> N
                     _say(options, f"arm server ready; dialing {options.dial}")
                     connection = await serialsocket.dial(port, options.dial)
                     _say(options, f"dialed {options.dial}: {connection}")
-                _say(options, f"connecting the serial socket on {a} at {baud} bit/s")
-                sock = await serialsocket.connect(port, endpoint)
-                rtt = sock.statistics().link.smoothed_rtt
-                measured = f" (round trip {rtt:.2f} s)" if rtt is not None else ""
-                _say(options, f"serial link up{measured}; authenticating")
+                _say(
+                    options,
+                    f"connecting the serial socket on {a} at {baud} bit/s and authenticating "
+                    "(the session's HELLO rides in the connection request)",
+                )
+                # Deferred: the request goes out with the HELLO inside (early
+                # data), a round trip sooner than connecting first.
+                sock = await serialsocket.connect(port, endpoint, defer=True)
                 try:
                     async with connect_stream(sock, identity=IDENTITY, key=key) as client:
+                        rtt = sock.statistics().link.smoothed_rtt
+                        measured = f" (round trip {rtt:.2f} s)" if rtt is not None else ""
+                        _say(options, f"serial link up{measured}; session granted")
                         holder["run"] = run = new_run(options)
                         await drive(
                             client,
