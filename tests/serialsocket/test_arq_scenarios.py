@@ -27,7 +27,7 @@ from serialsocket import (
 from serialsocket._pacer import HORIZON_CAP
 from serialsocket.packets import BlockCheck, Packet, PacketType, build_packet
 
-from .simlink import SimLink, split_packets
+from .simlink import SimLink, connected_pair, split_packets
 
 D = 1.0
 # These scenarios script exact Kermit bytes: the classic init and prefix-encoded
@@ -762,3 +762,32 @@ def test_derived_packet_length_follows_a_fast_long_line_only() -> None:
     assert a.parameters is not None
     assert a.parameters.send_max_length == 1024  # what the peer receives (PROTOCOL.md 4.7)
     assert a.statistics().packet_length == 256  # where the measured length starts
+
+
+def test_a_close_survives_its_last_ack_lost_when_the_peer_exits() -> None:
+    """The listener's close completes when the sender's EOF arrives; its ACK of
+    that EOF is then the last packet it sends before its program exits (the
+    linger dies with it).  One lost ACK left the netcat's sender "link dead"
+    with every byte delivered (2400 bit/s, 1.3 s, 1e-3).  The ACK completing a
+    close now goes three times."""
+    dropped: list[bytes] = []
+    ends: list[Endpoint] = []
+
+    def lose_first_final_ack(direction: str, pkt: bytes, now: float) -> list[bytes]:
+        closed = bool(ends) and ends[1].state is State.LINGER
+        if direction == "ba" and closed and not dropped and pkt[3:4] == b"Y":
+            dropped.append(pkt)
+            return []
+        return [pkt]
+
+    a, b, link = connected_pair(filters=[lose_first_final_ack])
+    ends += [a, b]
+    b.send_eof(link.now)  # the listener has nothing to send
+    assert a.send(b"x" * 600, link.now) == 600  # within the send buffer
+    a.send_eof(link.now)
+    link.run_until(lambda: b.state is State.LINGER)
+    b.receive_data = lambda data, now: None  # type: ignore[method-assign]  # it exits
+    link.run_until(lambda: a.state is not State.ESTABLISHED, limit=link.now + 120)
+    assert dropped
+    assert a.state in (State.LINGER, State.CLOSED, State.IDLE)
+    assert a.statistics().bytes_acknowledged == 600

@@ -24,6 +24,7 @@ from serialsocket import (
     State,
 )
 from serialsocket._config import MIN_ENDPOINT_PACKET_LENGTH
+from serialsocket._endpoint import FINAL_ACK_COPIES
 from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, Encoding, PacketType
 from tests.serialsocket.simlink import Filter, SimLink, split_packets
 
@@ -237,18 +238,20 @@ def test_dead_link_timer_fires_when_due() -> None:
 
 
 def _drop_to_back_off_then_lose_last_ack() -> tuple[Filter, Callable[[], int]]:
-    """Lose A's EOF twice (A's timeout backs off to 4x), then B's ACK of the third copy."""
+    """Lose A's EOF twice (A's timeout backs off to 4x), then B's ACK of the third
+    copy, with the copies B sends of the ACK that completes its close."""
     eofs = 0
-    ack_dropped = False
+    acks_dropped = 0
 
     def impair(direction: str, packet: bytes, now: float) -> list[bytes]:
-        nonlocal eofs, ack_dropped
+        nonlocal eofs, acks_dropped
         if direction == "ab" and packet[3] == ord(PacketType.EOF.value):
             eofs += 1
             if eofs <= 2:
                 return []
-        if direction == "ba" and eofs == 3 and not ack_dropped and packet[3] == ord("Y"):
-            ack_dropped = True
+        lost = acks_dropped <= FINAL_ACK_COPIES
+        if direction == "ba" and eofs == 3 and lost and packet[3] == ord("Y"):
+            acks_dropped += 1
             return []
         return [packet]
 

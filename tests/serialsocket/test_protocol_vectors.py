@@ -116,7 +116,17 @@ def exchange() -> list[Vector]:
     send("B", "ACK of the EOF (4); A's direction is finished")
     b.close(t)
     send("B", "B closes too: its EOF")
-    send("A", "ACK of B's EOF: both directions done, both sides LINGER")
+    send(
+        "A",
+        "ACK of B's EOF: both of A's directions are done, A LINGERs",
+        "the same ACK again: the ACK that completes a close goes three times",
+        "and a third time (it may be the last packet before A's program exits)",
+    )
+    send(
+        "B",
+        "B's directions are done too, B LINGERs: its last ACK (of A's EOF) again",
+        "and a third time",
+    )
     assert (a.state, b.state) == (State.LINGER, State.LINGER)
     assert (a.data_to_send(t), b.data_to_send(t)) == (b"", b"")
 
