@@ -49,7 +49,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, Any
 
-from serialsocket import Endpoint, EndpointConfig
+from serialsocket import EndpointConfig
 from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     PRINTABLE,
@@ -62,7 +62,7 @@ from serialsocket.packets import (
     data_capacity,
 )
 
-from ._transfer import BITS_PER_CHAR, packet_error_probability
+from ._transfer import BITS_PER_CHAR, agree, packet_error_probability
 
 __all__ = [
     "GUARD",
@@ -240,17 +240,6 @@ def netcat_config(row: TransferRow, *, hints: bool, dense: bool = True) -> Endpo
     )
 
 
-def _agree(config: EndpointConfig) -> Negotiated:
-    """What two endpoints with ``config`` agree on, from a real init exchange."""
-    a, b = Endpoint(config), Endpoint(config)
-    b.listen()
-    a.connect(0.0)
-    b.receive_data(a.data_to_send(0.0), 0.0)
-    a.receive_data(b.data_to_send(0.0), 0.0)
-    assert a.parameters is not None, "two endpoints of one configuration always agree"
-    return a.parameters
-
-
 def _encoding_name(agreed: Negotiated) -> str:
     if isinstance(agreed.encoding, EscapeEncoding):
         return "escape"
@@ -286,7 +275,7 @@ def line_limit(
 
 
 def _limit_at(row: TransferRow, payload: bytes, config: EndpointConfig, length: int) -> LineLimit:
-    agreed = _agree(replace(config, max_packet_length=length, long_window=None))
+    agreed = agree(replace(config, max_packet_length=length, long_window=None))
     capacity = data_capacity(agreed.send_max_length, agreed.check)
     fields = agreed.encoding.encode_fields(payload, capacity, 1 << 30)
     full = fields[:-1] or fields

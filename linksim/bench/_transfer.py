@@ -135,15 +135,19 @@ def agreed_parameters(encoding: Encoding, max_len: int, dense: bool = False) -> 
     cost of the protocol's choice, as its ACKs are, and the limit is the
     same whatever the hints made the endpoints choose.  ``dense``: both offer
     the dense encodings (PROTOCOL.md section 10), as the netcat does."""
-    cfg = EndpointConfig(
-        max_packet_length=max_len, encoding=encoding, long_window=None, dense=dense
+    return agree(
+        EndpointConfig(max_packet_length=max_len, encoding=encoding, long_window=None, dense=dense)
     )
-    a, b = Endpoint(cfg), Endpoint(cfg)
+
+
+def agree(config: EndpointConfig) -> Negotiated:
+    """What two endpoints with ``config`` agree on, from a real init exchange."""
+    a, b = Endpoint(config), Endpoint(config)
     b.listen()
     a.connect(0.0)
     b.receive_data(a.data_to_send(0.0), 0.0)
     a.receive_data(b.data_to_send(0.0), 0.0)
-    assert a.parameters is not None, "two default endpoints always agree"
+    assert a.parameters is not None, "two endpoints of one configuration always agree"
     return a.parameters
 
 

@@ -6,7 +6,8 @@ up to the line's transmit times."""
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
+import contextlib
+from collections.abc import AsyncIterator, Awaitable, Callable
 
 import pytest
 import trio
@@ -53,6 +54,15 @@ def run(fn: Callable[[], Awaitable[None]]) -> None:
     trio.run(fn, clock=trio.testing.MockClock(autojump_threshold=0))
 
 
+@contextlib.asynccontextmanager
+async def _moon() -> AsyncIterator[tuple[ImpairedLink, trio.Nursery, SerialListener]]:
+    """The Moon line with a listener at its b end and a nursery, all within 120 s."""
+    line = ImpairedLink(MOON)
+    with trio.fail_after(120):
+        async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
+            yield line, nursery, listener
+
+
 async def _accept_one(
     listener: SerialListener,
     into: list[tuple[float, SerialSocket]],
@@ -67,87 +77,79 @@ async def _accept_one(
 
 def test_the_first_write_rides_in_the_connection_request() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
-                accepted: list[tuple[float, SerialSocket]] = []
-                clients: list[SerialSocket] = []
-                init_time: list[float] = []
-                nursery.start_soon(_accept_one, listener, accepted, clients, init_time)
-                client = await connect(line.a, CFG, nursery=nursery, defer=True)
-                clients.append(client)
-                await trio.sleep(10.0)
-                # Nothing on the line yet: the request waits for the first write.
-                assert client.statistics().port_bytes_out == 0
-                assert listener.endpoint.state is State.LISTEN
-                assert _state(client) is State.IDLE
-                written_at = trio.current_time()
-                await client.send_all(b"STOP ARM")
-                assert trio.current_time() == written_at  # queued, not waited for
-                assert _state(client) is State.CONNECTING
-                while not accepted:
-                    await trio.sleep(0.01)
-                accepted_at, server = accepted[0]
-                # Delivered with the accept, one way after the write.
-                assert await server.receive_some() == b"STOP ARM"
-                # One way plus the init's line time (the 8 bytes in it), to a
-                # character: the link hands a packet over with its last one.
-                assert 0 < init_time[0] < INIT_TIME
-                assert accepted_at == pytest.approx(
-                    written_at + init_time[0] + ONE_WAY, abs=1.5 / CPS
-                )
-                assert server.endpoint.statistics().early_received == 8
-                await client.send_all(b" then more")
-                assert await server.receive_some() == b" then more"
-                assert _state(client) is State.ESTABLISHED
-                link = client.statistics().link
-                assert (link.early_sent, link.early_delivered) == (8, 8)
-                assert client.expedited
-                assert server.expedited
-                async with trio.open_nursery() as closing:
-                    closing.start_soon(client.aclose)
-                    closing.start_soon(server.aclose)
-                assert client.close_error is None
-                assert server.close_error is None
+        async with _moon() as (line, nursery, listener):
+            accepted: list[tuple[float, SerialSocket]] = []
+            clients: list[SerialSocket] = []
+            init_time: list[float] = []
+            nursery.start_soon(_accept_one, listener, accepted, clients, init_time)
+            client = await connect(line.a, CFG, nursery=nursery, defer=True)
+            clients.append(client)
+            await trio.sleep(10.0)
+            # Nothing on the line yet: the request waits for the first write.
+            assert client.statistics().port_bytes_out == 0
+            assert listener.endpoint.state is State.LISTEN
+            assert _state(client) is State.IDLE
+            written_at = trio.current_time()
+            await client.send_all(b"STOP ARM")
+            assert trio.current_time() == written_at  # queued, not waited for
+            assert _state(client) is State.CONNECTING
+            while not accepted:
+                await trio.sleep(0.01)
+            accepted_at, server = accepted[0]
+            # Delivered with the accept, one way after the write.
+            assert await server.receive_some() == b"STOP ARM"
+            # One way plus the init's line time (the 8 bytes in it), to a
+            # character: the link hands a packet over with its last one.
+            assert 0 < init_time[0] < INIT_TIME
+            assert accepted_at == pytest.approx(written_at + init_time[0] + ONE_WAY, abs=1.5 / CPS)
+            assert server.endpoint.statistics().early_received == 8
+            await client.send_all(b" then more")
+            assert await server.receive_some() == b" then more"
+            assert _state(client) is State.ESTABLISHED
+            link = client.statistics().link
+            assert (link.early_sent, link.early_delivered) == (8, 8)
+            assert client.expedited
+            assert server.expedited
+            async with trio.open_nursery() as closing:
+                closing.start_soon(client.aclose)
+                closing.start_soon(server.aclose)
+            assert client.close_error is None
+            assert server.close_error is None
 
     run(main)
 
 
 def test_a_receive_alone_sends_the_request_a_moment_later() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
-                accepted: list[tuple[float, SerialSocket]] = []
+        async with _moon() as (line, nursery, listener):
+            accepted: list[tuple[float, SerialSocket]] = []
 
-                clients: list[SerialSocket] = []
-                init_time: list[float] = []
+            clients: list[SerialSocket] = []
+            init_time: list[float] = []
 
-                async def greet() -> None:
-                    await _accept_one(listener, accepted, clients, init_time)
-                    await accepted[0][1].send_all(b"arm ready")
+            async def greet() -> None:
+                await _accept_one(listener, accepted, clients, init_time)
+                await accepted[0][1].send_all(b"arm ready")
 
-                nursery.start_soon(greet)
-                client = await connect(line.a, CFG, nursery=nursery, defer=True)
-                clients.append(client)
-                started = trio.current_time()
-                # A first receive cancelled within the moment neither sends the
-                # request nor postpones it.
-                with trio.move_on_after(0.02):
-                    await client.receive_some()
-                assert client.statistics().port_bytes_out == 0
-                assert await client.receive_some() == b"arm ready"
-                accepted_at, server = accepted[0]
-                request_at = started + 0.05  # _REQUEST_GRACE, from the first receive
-                assert 0 < init_time[0] < INIT_TIME
-                assert accepted_at == pytest.approx(
-                    request_at + init_time[0] + ONE_WAY, abs=1.5 / CPS
-                )
-                assert client.statistics().link.early_sent == 0
-                assert server.endpoint.statistics().early_received == 0
-                await client.aclose()
-                await server.aclose()
-                nursery.cancel_scope.cancel()
+            nursery.start_soon(greet)
+            client = await connect(line.a, CFG, nursery=nursery, defer=True)
+            clients.append(client)
+            started = trio.current_time()
+            # A first receive cancelled within the moment neither sends the
+            # request nor postpones it.
+            with trio.move_on_after(0.02):
+                await client.receive_some()
+            assert client.statistics().port_bytes_out == 0
+            assert await client.receive_some() == b"arm ready"
+            accepted_at, server = accepted[0]
+            request_at = started + 0.05  # _REQUEST_GRACE, from the first receive
+            assert 0 < init_time[0] < INIT_TIME
+            assert accepted_at == pytest.approx(request_at + init_time[0] + ONE_WAY, abs=1.5 / CPS)
+            assert client.statistics().link.early_sent == 0
+            assert server.endpoint.statistics().early_received == 0
+            await client.aclose()
+            await server.aclose()
+            nursery.cancel_scope.cancel()
 
     run(main)
 
@@ -285,53 +287,49 @@ def test_closing_after_the_first_write_delivers_it() -> None:
 
 def test_a_cancelled_receive_waiting_for_the_connection_leaves_the_socket_usable() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
+        async with _moon() as (line, nursery, listener):
 
-                async def echo() -> None:
-                    server = await listener.accept()
-                    while data := await server.receive_some():
-                        await server.send_all(data.upper())
-                    await server.aclose()
+            async def echo() -> None:
+                server = await listener.accept()
+                while data := await server.receive_some():
+                    await server.send_all(data.upper())
+                await server.aclose()
 
-                nursery.start_soon(echo)
-                client = await connect(line.a, CFG, nursery=nursery, defer=True)
-                await client.send_all(b"ping")
-                with trio.move_on_after(1.0) as scope:
-                    await client.receive_some()
-                assert scope.cancelled_caught
-                assert _state(client) is State.CONNECTING
-                assert await client.receive_some() == b"PING"
-                await client.send_all(b"again")
-                assert await client.receive_some() == b"AGAIN"
-                await client.aclose()
-                assert client.close_error is None
+            nursery.start_soon(echo)
+            client = await connect(line.a, CFG, nursery=nursery, defer=True)
+            await client.send_all(b"ping")
+            with trio.move_on_after(1.0) as scope:
+                await client.receive_some()
+            assert scope.cancelled_caught
+            assert _state(client) is State.CONNECTING
+            assert await client.receive_some() == b"PING"
+            await client.send_all(b"again")
+            assert await client.receive_some() == b"AGAIN"
+            await client.aclose()
+            assert client.close_error is None
 
     run(main)
 
 
 def test_an_expedited_message_waits_for_the_connection() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
-                accepted: list[tuple[float, SerialSocket]] = []
-                nursery.start_soon(_accept_one, listener, accepted)
-                client = await connect(line.a, CFG, nursery=nursery, defer=True)
-                # Before: the lane asked for (the answer decides), and no
-                # latest-value lane (send_latest cannot wait for one).
-                assert (client.expedited, client.latest) == (True, False)
-                await client.send_expedited(b"STOP")  # sends the request, waits for the answer
-                assert _state(client) is State.ESTABLISHED
-                assert (client.expedited, client.latest) == (True, True)
-                while not accepted:
-                    await trio.sleep(0.01)
-                server = accepted[0][1]
-                assert await server.receive_expedited() == b"STOP"
-                async with trio.open_nursery() as closing:
-                    closing.start_soon(client.aclose)
-                    closing.start_soon(server.aclose)
+        async with _moon() as (line, nursery, listener):
+            accepted: list[tuple[float, SerialSocket]] = []
+            nursery.start_soon(_accept_one, listener, accepted)
+            client = await connect(line.a, CFG, nursery=nursery, defer=True)
+            # Before: the lane asked for (the answer decides), and no
+            # latest-value lane (send_latest cannot wait for one).
+            assert (client.expedited, client.latest) == (True, False)
+            await client.send_expedited(b"STOP")  # sends the request, waits for the answer
+            assert _state(client) is State.ESTABLISHED
+            assert (client.expedited, client.latest) == (True, True)
+            while not accepted:
+                await trio.sleep(0.01)
+            server = accepted[0][1]
+            assert await server.receive_expedited() == b"STOP"
+            async with trio.open_nursery() as closing:
+                closing.start_soon(client.aclose)
+                closing.start_soon(server.aclose)
 
     run(main)
 
@@ -347,45 +345,41 @@ def test_defer_and_early_data_together_are_a_value_error() -> None:
 
 def test_open_serial_socket_defers_too() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
+        async with _moon() as (line, nursery, listener):
 
-                async def reply() -> None:
-                    server = await listener.accept()
-                    assert await server.receive_some() == b"hi"
-                    await server.send_all(b"yo")
-                    assert await server.receive_some() == b""
-                    await server.aclose()
+            async def reply() -> None:
+                server = await listener.accept()
+                assert await server.receive_some() == b"hi"
+                await server.send_all(b"yo")
+                assert await server.receive_some() == b""
+                await server.aclose()
 
-                nursery.start_soon(reply)
-                async with open_serial_socket(line.a, CFG, defer=True) as client:
-                    assert client.statistics().port_bytes_out == 0
-                    await client.send_all(b"hi")
-                    assert await client.receive_some() == b"yo"
-                assert client.close_error is None
-                assert client.statistics().link.early_delivered == 2
+            nursery.start_soon(reply)
+            async with open_serial_socket(line.a, CFG, defer=True) as client:
+                assert client.statistics().port_bytes_out == 0
+                await client.send_all(b"hi")
+                assert await client.receive_some() == b"yo"
+            assert client.close_error is None
+            assert client.statistics().link.early_delivered == 2
 
     run(main)
 
 
 def test_send_eof_alone_sends_the_request() -> None:
     async def main() -> None:
-        line = ImpairedLink(MOON)
-        with trio.fail_after(120):
-            async with trio.open_nursery() as nursery, listen(line.b, CFG) as listener:
+        async with _moon() as (line, nursery, listener):
 
-                async def read_eof() -> None:
-                    server = await listener.accept()
-                    assert await server.receive_some() == b""
-                    await server.aclose()
+            async def read_eof() -> None:
+                server = await listener.accept()
+                assert await server.receive_some() == b""
+                await server.aclose()
 
-                nursery.start_soon(read_eof)
-                client = await connect(line.a, CFG, nursery=nursery, defer=True)
-                await client.send_eof()
-                assert _state(client) is State.CONNECTING
-                assert await client.receive_some() == b""
-                await client.aclose()
-                assert client.close_error is None
+            nursery.start_soon(read_eof)
+            client = await connect(line.a, CFG, nursery=nursery, defer=True)
+            await client.send_eof()
+            assert _state(client) is State.CONNECTING
+            assert await client.receive_some() == b""
+            await client.aclose()
+            assert client.close_error is None
 
     run(main)
