@@ -9,7 +9,21 @@ check are also chosen by the fuzzer.  Properties (any violation raises):
 * every accepted packet re-serialises to bytes the parser accepts again as the
   same packet;
 * both prefix decoders (``decode`` and the sequential reference) agree on the
-  accepted packet's data, raising only ``MalformedDataError``.
+  accepted packet's data, raising only ``MalformedDataError``;
+* every dense decoder (escape code, escape with XON/XOFF, radix 91; PROTOCOL.md
+  section 10) accepts an accepted packet's data only in its canonical encoding.
+
+The same cut chunks, and the data fields of the accepted packets, are then
+decoded as the fields of one arrival by every encoding, prefix and dense:
+
+* ``decode_fields`` (what the ARQ receiver calls) decodes exactly as
+  ``decode`` field by field: the same bytes, or ``MalformedDataError`` when
+  any field is malformed on its own (no token may cross a field, PROTOCOL.md
+  sections 1 and 10.3-10.4);
+* ``encode_fields`` of the stream at a capacity the fuzzer chooses cuts
+  fields of at most that many characters, carrying at least one byte each,
+  the same fields as ``encode_prefix`` over what is left, and they decode
+  back to the bytes they carry.
 """
 
 from __future__ import annotations
@@ -35,6 +49,9 @@ with instrumented(__name__ == "__main__"):
 
 _CHECKS = tuple(BlockCheck)
 _DENSE = (EscapeEncoding(), EscapeEncoding(unsafe=XON_XOFF), Radix91Encoding())
+_ALL = (PRINTABLE, EIGHT_BIT_CLEAN, *_DENSE)
+_MIN_CAPACITY = 5
+"""The smallest capacity every encoding cuts fields at (a prefix token)."""
 
 
 def _decoded(decode: object, data: bytes) -> bytes | str:
@@ -42,6 +59,41 @@ def _decoded(decode: object, data: bytes) -> bytes | str:
         return decode(data)  # type: ignore[operator,no-any-return]
     except MalformedDataError as exc:
         return type(exc).__name__
+
+
+def _check_fields(fields: list[bytes]) -> None:
+    """``decode_fields`` decodes as ``decode`` field by field, or raises when it does."""
+    for enc in _ALL:
+        each = [_decoded(enc.decode, f) for f in fields]
+        together = _decoded(enc.decode_fields, fields)
+        if all(isinstance(e, bytes) for e in each):
+            expected: bytes | str = b"".join(e for e in each if isinstance(e, bytes))
+        else:
+            expected = "MalformedDataError"
+        if together != expected:
+            raise AssertionError(
+                f"{enc!r}.decode_fields({fields!r}) = {together!r}, field by field {expected!r}"
+            )
+
+
+def _check_cutting(stream: bytes, capacity: int, count: int) -> None:
+    """``encode_fields`` cuts what ``encode_prefix`` cuts, within capacity, and decodes back."""
+    for enc in _ALL:
+        fields = enc.encode_fields(stream, capacity, count)
+        carried = 0
+        for field, n in fields:
+            prefix = enc.encode_prefix(stream[carried:], capacity)
+            if (field, n) != prefix or len(field) > capacity or n < 1:
+                raise AssertionError(
+                    f"{enc!r}: field {field!r} carrying {n} at {carried}, "
+                    f"encode_prefix {prefix!r}, capacity {capacity}"
+                )
+            carried += n
+        if len(fields) < count and carried != len(stream):
+            raise AssertionError(f"{enc!r}: {len(fields)} fields carried {carried} bytes")
+        back = enc.decode_fields([f for f, _ in fields])
+        if back != stream[:carried]:
+            raise AssertionError(f"{enc!r}: cut fields decode to {back!r}")
 
 
 def one_input(data: bytes) -> None:
@@ -53,12 +105,16 @@ def one_input(data: bytes) -> None:
     parser = PacketParser(max_length=max_length, check=check)
     pos = 0
     step = 1 + (data[2] >> 2)
+    chunks: list[bytes] = []
+    accepted: list[bytes] = []
     while pos < len(stream):
         chunk = stream[pos : pos + step]
+        chunks.append(chunk)
         pos += step
         parser.receive_data(chunk)
         while (event := parser.next_event()) is not None:
             if isinstance(event, PacketReceived):
+                accepted.append(event.packet.data)
                 again = PacketParser(max_length=max(max_length, event.length), check=event.check)
                 again.receive_data(build_packet(event.packet, event.check))
                 echo = again.next_event()
@@ -77,6 +133,10 @@ def one_input(data: bytes) -> None:
                 raise AssertionError(f"unexpected event {event!r}")
         if parser.buffered > max(max_length, len(chunk)) + len(chunk):
             raise AssertionError(f"parser holds {parser.buffered} bytes")
+    _check_fields(chunks)
+    if accepted:
+        _check_fields(accepted)
+    _check_cutting(stream, _MIN_CAPACITY + data[0] % 128 + data[1] % 128, 1 + data[1] % 8)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,15 @@ files are committed (.gitignore).
 from __future__ import annotations
 
 from fuzz._atheris import CORPUS
-from serialsocket.packets import BlockCheck, Packet, build_packet
+from serialsocket.packets import (
+    PRINTABLE,
+    XON_XOFF,
+    BlockCheck,
+    EscapeEncoding,
+    Packet,
+    Radix91Encoding,
+    build_packet,
+)
 from tcpstream import commands
 from tcpstream.commands import Packet as CommandPacket
 from tcpstream.commands import PacketKind, encode_packet, words_body
@@ -27,6 +35,16 @@ def _seeds() -> dict[str, dict[str, bytes]]:
         )
     )
     hello = encode_packet(CommandPacket(PacketKind.HELLO, flags=1, counter=1))
+    # Dense data fields (PROTOCOL.md section 10) in CRC-32 packets, and streams
+    # that are runs of fields for decode_fields: fuzz_parser's third byte is
+    # the check (mod 4; 3 = CRC-32) and the chunk length - 1 (>> 2).
+    binary = bytes(range(256)) * 3
+    radix = Radix91Encoding().encode(binary[:650])  # 50 blocks, 800 characters
+    escaped = EscapeEncoding(unsafe=XON_XOFF).encode(binary)
+    dense_packets = b"".join(
+        build_packet(Packet(seq=i, type="D", data=field), BlockCheck.CRC32)
+        for i, field in enumerate((radix[:93], escaped[:90], radix[96:160], escaped[300:390]))
+    )
     # fuzz_arq_receive: per side window, max length (2 bytes), encoding; then operations.
     small = b"\x07\x00\x80\x00" * 2
     wide = b"\x1e\x05\x00\x01" * 2
@@ -35,6 +53,10 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "seed-data": b"\x00\x80\x03" + data,
             "seed-mixed": b"\x00\x80\x07" + b"noise\r\n" + ack + data[:9] + data + init,
             "seed-sum6": b"\x01\x00\x00" + ack + init,
+            "seed-dense-crc32": b"\x04\x00\xff" + dense_packets,
+            "seed-radix91-fields": b"\x00\x80\x3f" + radix,
+            "seed-escape-fields": b"\x00\x80\x93" + escaped,
+            "seed-prefix-fields": b"\x00\x80\x9e" + PRINTABLE.encode(binary),
         },
         "fuzz_command_packet": {
             "seed-command": b"\x00" + command,

@@ -172,12 +172,18 @@ class EscapeEncoding:
         return np.compress(keep, out).tobytes()
 
     def decode_fields(self, fields: Sequence[bytes]) -> bytes:
-        """Decode consecutive data fields together (escapes never cross a
-        field, so their concatenation decodes exactly as the fields one by one).
+        """Decode consecutive data fields together, exactly as the fields one
+        by one: an escape never crosses a field, so a field that ends in the
+        escape byte is malformed even when the next one starts with an escaped
+        form.  Otherwise the concatenation decodes as the fields do.
 
         Raises:
-            MalformedDataError: as :meth:`decode`.
+            MalformedDataError: as :meth:`decode`, for any of the fields.
         """
+        escape = self.escape
+        for f in fields[:-1]:
+            if f and f[-1] == escape:
+                raise _malformed("escape byte at the end of the field")
         return self.decode(b"".join(fields))
 
     def encode_prefix(

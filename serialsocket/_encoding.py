@@ -464,13 +464,30 @@ class Encoding:
     def decode_fields(self, fields: Sequence[bytes]) -> bytes:
         """Decode consecutive data fields (what one read delivered) together.
 
-        Tokens never cross a field, so the concatenation decodes exactly as
-        the fields one by one, and a long input takes the vectorised path.
+        Exactly as the fields one by one: a token never crosses a field, so a
+        field that ends inside a prefix sequence is malformed even when the
+        next field would complete it.  A long input takes the vectorised path
+        once, checking that every field boundary is a token boundary.
 
         Raises:
-            MalformedDataError: as :meth:`decode`.
+            MalformedDataError: as :meth:`decode`, for any of the fields.
         """
-        return self.decode(b"".join(fields))
+        if len(fields) == 1:
+            return self.decode(fields[0])
+        raw = b"".join(fields)
+        if len(raw) < _VECTOR_FROM:
+            return b"".join(map(self.decode, fields))
+        settled = self._settled_states(raw)
+        if settled is None:
+            return b"".join(map(self.decode, fields))
+        st, cls = settled
+        if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
+            raise _dangling()
+        cuts = np.cumsum(np.fromiter(map(len, fields[:-1]), np.int64, len(fields) - 1))
+        cuts = cuts[cuts < len(raw)]
+        if cuts.size and (st[cuts] != _S0).any():
+            raise _dangling()
+        return self._emit_decoded(raw, st)
 
     def _decode_split(self, raw: bytes) -> bytes:
         """Short fields: tokenise with one regular expression, look tokens up."""
@@ -492,6 +509,20 @@ class Encoding:
 
     def _decode_vector(self, raw: bytes) -> bytes:
         """Long fields: all positions at once (see the module docstring)."""
+        settled = self._settled_states(raw)
+        if settled is None:
+            return self._decode_split(raw)
+        st, cls = settled
+        if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
+            raise _dangling()
+        return self._emit_decoded(raw, st)
+
+    def _settled_states(
+        self, raw: bytes
+    ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.int8]] | None:
+        """The tokeniser's state before each character of ``raw`` (non-empty)
+        and each character's class, or None if they have not settled after
+        ``_MAX_ROUNDS`` (the caller then tokenises sequentially)."""
         n = len(raw)
         # All small-table lookups go through bytes.translate: it runs at memory
         # speed, several times faster than numpy fancy indexing on int8 tables.
@@ -502,14 +533,10 @@ class Encoding:
         st = np.empty(n, dtype=np.int8)
         st[0] = _S0
         st[1:] = np.frombuffer(raw.translate(start_table), np.int8)[:-1]
-        if n < _DENSE_BELOW:
-            if not self._settle_in_pairs(st, cls):
-                return self._decode_split(raw)
-        elif not self._settle_sparse(st, cls):
-            return self._decode_split(raw)
-        if _T_FLAT[st[-1] * 4 + cls[-1]] != _S0:
-            raise _dangling()
-        return self._emit_decoded(raw, st)
+        settled = (
+            self._settle_in_pairs(st, cls) if n < _DENSE_BELOW else self._settle_sparse(st, cls)
+        )
+        return (st, cls) if settled else None
 
     @staticmethod
     def _settle_in_pairs(st: npt.NDArray[np.int8], cls: npt.NDArray[np.int8]) -> bool:

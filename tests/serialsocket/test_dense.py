@@ -17,7 +17,15 @@ from serialsocket._dense import (
     Radix91Encoding,
     _encode_tail,
 )
-from serialsocket.packets import PRINTABLE, Packet, PacketParser, PacketReceived, build_packet
+from serialsocket.packets import (
+    EIGHT_BIT_CLEAN,
+    PRINTABLE,
+    Encoding,
+    Packet,
+    PacketParser,
+    PacketReceived,
+    build_packet,
+)
 
 from .strategies import payloads
 
@@ -283,6 +291,41 @@ def test_decode_fields_equals_decoding_one_by_one(
     assert enc.decode_fields(fields) == one_by_one
     if damage is None:
         assert one_by_one == data
+
+
+@pytest.mark.parametrize(
+    ("enc", "fields"),
+    [
+        (EscapeEncoding(), [b"ab\x18", b"Acd"]),  # ESC ends a field, its 0x41 starts the next
+        (EscapeEncoding(unsafe=XON_XOFF), [b"\x18", b"Q", b"x"]),
+        (PRINTABLE, [b"ab#", b"Mcd"]),  # QCTL ends a field
+        (EIGHT_BIT_CLEAN, [b"ab#", b"Mcd"]),
+        (PRINTABLE, [b"ab&", b"a"]),  # QBIN
+        (PRINTABLE, [b"x~", b"#a"]),  # a repeat count split from its REPT
+        (PRINTABLE, [b"a" * 800 + b"#", b"M" + b"b" * 100]),  # the vectorised path
+        (PRINTABLE, [b"b" * 300 + b"~(", b"c", b"a" * 500]),
+    ],
+)
+def test_decode_fields_rejects_a_token_across_fields(
+    enc: EscapeEncoding | Encoding, fields: list[bytes]
+) -> None:
+    """Found by fuzz_parser's decode_fields property (2026-11-29): the fields of
+    one arrival were decoded as their concatenation, so a token cut at the end
+    of one packet and completed by the next was accepted -- a malformed field
+    (PROTOCOL.md 10.3; Kermit's prefixes) aborted the connection or not
+    depending on whether the next packet arrived in the same read."""
+    with pytest.raises(MalformedDataError):
+        enc.decode(fields[0])
+    with pytest.raises(MalformedDataError):
+        enc.decode_fields(fields)
+
+
+@pytest.mark.parametrize("enc", [PRINTABLE, EIGHT_BIT_CLEAN])
+def test_prefix_decode_fields_vectorised_matches_one_by_one(enc: Encoding) -> None:
+    data = bytes(range(256)) * 8 + b"\x00" * 300 + b"#&~" * 50
+    fields = [f for f, _ in enc.encode_fields(data, 90, 10_000)]
+    assert sum(map(len, fields)) > 768  # past _VECTOR_FROM
+    assert enc.decode_fields(fields) == data == b"".join(map(enc.decode, fields))
 
 
 @pytest.mark.parametrize("blocks", [1, 7, 255, 256, 600])
