@@ -263,7 +263,16 @@ class Encoding:
             chunk = np.frombuffer(view[:span], dtype=np.uint8)
             units, counts = self._units(chunk)
             out, used_units = self._emit(units, counts, capacity)
-            if used_units < len(units) or span >= total:
+            # The field must end at a token that more source cannot change: the
+            # slice may cut a run short (two bytes of a longer run are two
+            # tokens that fit where its repeat token does not).
+            # (At most two units are open, so most slices need no look.)
+            final = (
+                span >= total
+                or used_units < len(units) - 2
+                or used_units < len(units) - self._open_units(chunk)
+            )
+            if final:
                 consumed = used_units if counts is None else int(counts[:used_units].sum())
                 return out, consumed
             span *= 4
@@ -357,6 +366,17 @@ class Encoding:
         if len(fields) < count and src_base < len(view):
             fields.extend(self.encode_fields(view[src_base:], capacity, count - len(fields)))
         return fields
+
+    def _open_units(self, chunk: U8) -> int:
+        """Units at the end of a slice that more source could still change: the
+        piece of its trailing run of equal bytes after the run's whole
+        ``_MAX_RUN``-byte tokens (one repeat token, or one or two single ones)."""
+        if self.rept is None:
+            return 0
+        differ = np.flatnonzero(chunk != chunk[-1])
+        run = chunk.size - (int(differ[-1]) + 1 if differ.size else 0)
+        rest = run % _MAX_RUN
+        return rest if rest < _MIN_RUN else 1
 
     def _runs(self, arr: U8) -> tuple[I64, I64] | None:
         """Maximal runs of at least three equal bytes: (starts, lengths), or None.

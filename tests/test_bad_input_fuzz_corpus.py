@@ -30,6 +30,9 @@ PINNED: list[tuple[str, bytes]] = [
     # end of one field and completed by the next (3-byte chunks) was accepted.
     ("fuzz_parser", b"\x00\x80\x08ab#Mcd"),
     ("fuzz_parser", b"\x00\x80\x08ab\x18Acd"),
+    # Found by fuzz_parser (2026-11-29), fixed in encode_prefix: a run cut at the
+    # end of its slice (capacity 6, two fields).
+    ("fuzz_parser", b"\x00\x01\x00abcd\x00\x00\x00\x00\x00"),
 ]
 
 

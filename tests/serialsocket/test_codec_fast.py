@@ -125,6 +125,18 @@ def test_encode_fields_matches_reference(
 
 
 @pytest.mark.parametrize("enc", ALL_PROFILES, ids=repr)
+def test_encode_prefix_never_cuts_a_run_at_its_slice(enc: Encoding) -> None:
+    """Found by fuzz_parser's encode_fields property (2026-11-29): encode_prefix
+    tokenised a slice of ``capacity`` bytes, so a run crossing the slice's end
+    counted as two single tokens that fit where the run's repeat token did not,
+    and a field depended on how many fields were cut with it."""
+    for data, capacity in ((b"abcd" + b"\0" * 5, 6), (b"xy" * 40 + b"\x81" * 200, 90)):
+        expected = _reference_encode_prefix(enc, data, capacity)
+        assert enc.encode_prefix(data, capacity) == expected
+        assert enc.encode_fields(data, capacity, 1)[0] == enc.encode_fields(data, capacity, 2)[0]
+
+
+@pytest.mark.parametrize("enc", ALL_PROFILES, ids=repr)
 def test_every_byte_value_and_run_boundary(enc: Encoding) -> None:
     # Each byte value alone, in runs of 1..3 and around the 94-byte repeat limit.
     for n in (1, 2, 3, 4, 93, 94, 95, 96, 97, 188, 189):
