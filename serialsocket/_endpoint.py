@@ -87,7 +87,7 @@ from ._params import (
     negotiate,
 )
 from ._parser import PacketParser, PacketReceived, RejectReason
-from ._rate import RateEstimator, RateMark
+from ._rate import PAIR_FASTER, RateEstimator, RateMark
 from ._receiver import Receiver
 from ._rtt import RttEstimator
 from ._sender import Outstanding, Sender
@@ -142,6 +142,15 @@ data delivered but not yet read."""
 PEER_LENGTH_DECAY = 0.98
 """Per data packet received, the peer's recent longest packet decays by this
 factor towards the packets it sends now: 512 down to 100 in 80 packets."""
+
+TUNE_EARLY = 4
+"""Receive-buffer autotuning looks at what arrived after a round trip over
+this many (:meth:`Endpoint._autotune`)."""
+
+PAIR_QUEUED = 1.5
+"""A packet whose modelled departure is this many of its transmit times after
+its handing went behind another: with that one, handed at the same instant,
+a rate pair (:meth:`Endpoint._pair_verdict`)."""
 
 FINAL_ACK_COPIES = 2
 """Extra copies of the last ACK when a close completes (both EOFs done)."""
@@ -919,7 +928,12 @@ class Endpoint:
         self._rate = RateEstimator(self._rate_hint())
         self._pacer.paced = self._rate.rate is not None
         self._pacer.tight = self._rate.rate is not None
+        self._pair: tuple[Outstanding, Outstanding] | None = None
+        self._pair_lead_acked: float | None = None
+        self._pair_settled: float | None = None
+        self._last_first: tuple[Outstanding, float] | None = None
         self._clock = 0.0
+        self._pacer.probe = self._pair_due()
         self._last_heard = 0.0
         self._last_probe = -math.inf
         self._init_deadline = math.inf
@@ -1348,6 +1362,8 @@ class Endpoint:
                 measured = True
             if pkt.mark is None:
                 continue
+            if self._pair is not None:
+                self._pair_verdict(pkt, now)
             before = self._rate.rate
             if self._rate.on_delivery(
                 pkt.mark, now, rtt, self._rtt.srtt, fast=early, wire_bytes=len(pkt.wire)
@@ -1369,6 +1385,65 @@ class Endpoint:
         # next step up (serialsocket/_length.py); a short tail packet does not.
         full = 0.9 * (self._length.length + 1)
         self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
+
+    def _pair_verdict(self, pkt: Outstanding, now: float) -> None:
+        """``pkt``'s first copy was acknowledged at ``now``: if it is the second
+        of the rate pair, the two ACKs' spacing tells the line's rate.
+
+        Two packets handed over at the same instant leave the line back to
+        back, however much waited ahead of them, so their ACKs come back the
+        second's real transmit time apart: the line's rate, with no base round
+        trip, model or init exchange in it.  The pacer cannot otherwise learn
+        that a rate (a hint) is too low: it hands one packet per modelled
+        transmit time into a line that is idle in between, the ACK clock then
+        shows the handing rate, and with the UART's queue kept short
+        (Pacer.tight) a packet leaves only (k - 1) real transmit times before
+        the model said on a line k times faster -- less than fast_evidence's
+        allowance for the init's own transmit times, for every k (a rate hint
+        ten times low stayed in use for good: 0.098 of the line at 2400 bit/s
+        and 20 s one way).  Without a rate, the first pair's measurement
+        becomes it.  One pair a round trip until one shows the line no faster
+        than the rate in use (_pair_due).
+        """
+        assert self._pair is not None
+        lead, second = self._pair
+        if pkt is lead:
+            self._pair_lead_acked = now
+            return
+        if pkt is not second or pkt.mark is None:
+            return
+        acked = self._pair_lead_acked
+        if acked is None:
+            return  # the lead was lost or acknowledged with this one: no verdict
+        verdict = self._rate.on_pair(len(pkt.wire), now - acked, pkt.mark.sent_at, now)
+        if verdict is None:
+            return
+        if verdict:
+            self._rate_changed()
+        else:
+            # The line is no faster: no more pairs, unless the rate drops far
+            # (a timeout undid a raise to what the line delivered).
+            self._pair_settled = self._rate.rate
+            self._pacer.probe = False
+
+    def _pair_due(self) -> bool:
+        """A rate pair may go now: no pair has settled the rate in use (or
+        it has dropped further below the one settled than a pair could show),
+        the peer sent no data in the last round trip, and the last pair was
+        answered (or resent: a resend's ACK is no sample)."""
+        rate, settled = self._rate.rate, self._pair_settled
+        if rate is not None and settled is not None and rate * PAIR_FASTER >= settled:
+            return False
+        # The peer's data spaces its ACKs by its line (on_pair tells nothing
+        # then), and a pair is one more packet an expedited message may wait
+        # behind: none while the way back carries data (a command session's
+        # replies and telemetry).
+        if self._clock - self._rate.reverse_at < (self._rtt.srtt or 0.0):
+            return False
+        if self._pair is None:
+            return True
+        lead, second = self._pair
+        return second.acked or second.transmissions > 1 or lead.transmissions > 1
 
     def _rearm_queued(self, now: float, mark: RateMark) -> None:
         """The line is slower than the model that timed the packets in flight:
@@ -1416,10 +1491,12 @@ class Endpoint:
         """The rate in use or the path's base round trip moved: pacing, the
         timeout floor, the window bound and the receive buffer follow."""
         self._pacer.paced = self._rate.rate is not None
-        # The short UART queue only at the rate the user gave, while the ACK
-        # clock agrees with it (see Pacer.horizon): an estimate still moving
-        # needs the queue to see the line.
+        # The short UART queue only at the rate the user gave (see
+        # Pacer.horizon), with a rate pair a round trip until one shows the
+        # line no faster (_pair_verdict): an estimate still moving needs the
+        # queue to see the line.
         self._pacer.tight = self._rate.rate is not None and self._rate.rate == self._rate_hint()
+        self._pacer.probe = self._pair_due()
         if self._negotiated is not None:
             self._length_changed()
             self._adapt_length(clean=False)  # the cap in characters moves with the rate
@@ -1435,22 +1512,36 @@ class Endpoint:
         that holds the sender back.  So, as Linux's receive-buffer autotuning
         does: each round trip, the buffer becomes at least
         :data:`BUFFER_ROUND_TRIPS` times what the application read in the
-        last one -- a sender held back by the window grows it every round
-        trip, and a reader that does not keep up never grows it (the bytes
-        counted are the ones read).  Never shrunk, capped by ``buffer_cap``.
+        last one (judged from a quarter of it on, at the rate it is read):
+        a sender held back by the window grows it every round trip, and a
+        reader that does not keep up never grows it (the bytes counted are
+        the ones read).  Never shrunk, capped by ``buffer_cap``.
+
+        Bytes held behind a gap count as read: the reader would have taken
+        them but for the loss, and a loss is exactly when the buffer must
+        hold a round trip more.  (Counting only what was read, the buffer
+        grew by what the window let through between gaps, and the window
+        held a 300 s line to half its rate once a rate hint ten times low
+        was corrected.)
         """
         srtt = self._rtt.srtt
-        if srtt is None or now - self._tune_at < srtt:
+        if srtt is None:
             return
-        taken = self._receiver.delivered_total - len(self._receiver.readable)
-        if self._tune_at > -math.inf:
-            want = BUFFER_ROUND_TRIPS * (taken - self._tune_taken)
+        r = self._receiver
+        taken = r.delivered_total - len(r.readable) + r.buffered_bytes
+        span = now - self._tune_at
+        if span >= srtt / TUNE_EARLY and self._tune_at > -math.inf:
+            # From a quarter of a round trip on, at the rate it arrives: the
+            # first full flight of a sender that just measured the line is
+            # a round trip of line, and waiting for the round trip to end
+            # held a 300 s line to a 64 KiB window for two more.
+            want = int(BUFFER_ROUND_TRIPS * (taken - self._tune_taken) * max(srtt / span, 1.0))
             cap = self.config.buffer_cap
             if want > cap:
                 self._buffer_capped = True
-            r = self._receiver
             r.receive_buffer = max(r.receive_buffer, min(want, cap))
-        self._tune_at, self._tune_taken = now, taken
+        if span >= srtt:
+            self._tune_at, self._tune_taken = now, taken
 
     def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
         self._peer_data_seen = True
@@ -1627,6 +1718,7 @@ class Endpoint:
 
     def _pacing_wake(self) -> float | None:
         s = self._sender
+        self._pacer.probe = self._pair_due()
         wants = (
             s.has_retransmit()
             or (s.has_new_data() and s.room(self._effective_window()) > 0)
@@ -1725,6 +1817,7 @@ class Endpoint:
 
     def _release_data(self, now: float, out: list[bytes]) -> None:
         s = self._sender
+        self._pacer.probe = self._pair_due()
         timeout = self._rtt.timeout()
         while s.has_retransmit() and self._pacer.has_room(now):
             pkt = s.pop_retransmit()
@@ -1794,6 +1887,20 @@ class Endpoint:
         pkt.done_at = self._account(pkt.wire, now)
         if pkt.transmissions == 1:
             pkt.mark = self._rate.mark(now)
+            last = self._last_first
+            if (
+                last is not None
+                and last[1] == now
+                and pkt.done_at - now >= PAIR_QUEUED * self._tx(len(pkt.wire))
+                and self._pair_due()
+            ):
+                # Behind another handed at the same instant: the rate pair.
+                self._pair = (last[0], pkt)
+                self._pair_lead_acked = None
+                self._pacer.probe = False
+            self._last_first = (pkt, now)
+        else:
+            self._last_first = None  # a resend between two breaks their pair
         self._sender.arm(pkt, pkt.done_at + timeout)
 
     # -- internals: timing --------------------------------------------------------------

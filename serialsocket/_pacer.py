@@ -49,6 +49,11 @@ class Pacer:
         self.tight = False
         """Keep the queue to :data:`HORIZON_CAP` (see :meth:`horizon`); the
         endpoint sets it while the rate in use is a confirmed one."""
+        self.probe = False
+        """Release at least two packets at once (:meth:`batch`), even into a
+        :attr:`tight` horizon: the endpoint wants a rate pair, two packets
+        that leave the line back to back (a packet handed into an idle line
+        cannot show that the line is faster than the rate in use)."""
         self.free_at: float | None = None
         """When the last byte handed to the line finishes leaving the UART
         (None before the first packet of a connection)."""
@@ -126,14 +131,12 @@ class Pacer:
 
     def batch(self, room: int, now: float) -> int:
         """How many of ``room`` full packets to release at once (at least one):
-        as many as fill the horizon's spare time."""
+        as many as fill the horizon's spare time, and two for a :attr:`probe`."""
         if not self.paced or self.free_at is None:
             return room
         spare = self.horizon() - max(self.free_at - now, 0.0)
-        return max(
-            1,
-            min(room, math.ceil(spare / max(self._transmit_time(self.full_packet), 1e-9))),
-        )
+        fill = math.ceil(spare / max(self._transmit_time(self.full_packet), 1e-9))
+        return max(1, min(room, max(fill, 2 if self.probe else 1)))
 
     def backlog(self, now: float) -> float:
         """Seconds of bytes still queued in the UART at ``now``."""

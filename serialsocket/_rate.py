@@ -45,6 +45,11 @@ How the estimate moves (:meth:`RateEstimator.on_delivery`):
 * down to the measured rate only while the queue proves the line busy at
   both ends of the sample's interval (an idle application or a shut window
   also makes samples low, and must not slow the pacer);
+* up to what a *rate pair* shows (:meth:`RateEstimator.on_pair`): two
+  packets handed at once leave back to back, and their ACKs come back one
+  real transmit time apart -- the only sample a pacer holding an idle line
+  to a rate hint that is too low can take; without a rate, the first pair
+  sets it;
 * back down to where it was when a retransmission timer fires after a raise
   that no later busy run has confirmed (:meth:`RateEstimator.on_timeout`):
   bunched ACKs can fake a sample or a busy run, and once every packet is
@@ -103,6 +108,18 @@ handed over, and no more: a queue draining does that (a pacer whose rate was
 measured a few per cent low); ACKs that waited at the far end and came back
 bunched show the peer's ACK clock, not our line (up to the ratio of a data
 packet to an ACK, 2.4 times a 300 bit/s line with 39-character packets)."""
+
+PAIR_FASTER_THAN_HINT = 1.5
+"""A rate pair (:meth:`RateEstimator.on_pair`) must show the line this many
+times faster than a hinted rate to raise it: a pair read 10 ms off at
+9600 bit/s is 10 % off, and a raise past a right hint costs the short UART
+queue."""
+
+PAIR_FASTER = 1.2
+"""... and this many times faster than a measured or raised rate: an ACK of
+the pair's first packet that waited behind another on the way back makes the
+pair look faster (a 2400 bit/s line measured at 275), and every raise past
+the line builds a queue a busy run must drain."""
 
 MAX_FILTER_ROUND_TRIPS = 10
 """Samples older than this many round trips leave the windowed maximum."""
@@ -235,6 +252,11 @@ class RateEstimator:
         """A packet carrying the peer's data arrived: the ACKs behind it on
         the peer's line were delayed by it, not by ours."""
         self._reverse_at = now
+
+    @property
+    def reverse_at(self) -> float:
+        """When the peer's data last arrived (-inf: never)."""
+        return self._reverse_at
 
     def hand(self, wire_bytes: int) -> None:
         """Count bytes handed to the line (every packet, any kind)."""
@@ -462,6 +484,41 @@ class RateEstimator:
         if changed:
             self._epoch += 1
         return changed
+
+    def on_pair(self, wire_bytes: int, spacing: float, sent_at: float, now: float) -> bool | None:
+        """Two packets handed to the line at ``sent_at``, back to back, were
+        acknowledged ``spacing`` seconds apart, the second (``wire_bytes``
+        long) at ``now``: the line sent it in about that time.
+
+        Returns None when the pair tells nothing (ACKs read together, or the
+        peer's data crossed the interval and spaced them by its line), True
+        when the rate was set (without one, to what the pair showed) or raised
+        (to what the pair showed, at most
+        :data:`RAMP_MAX` times: ACKs bunched at the far end fake speed, and
+        the raise is undone by a timeout no busy run has answered, like any
+        other), False when the line is no faster than the rate in use (within
+        :data:`PAIR_FASTER_THAN_HINT` of a hint, :data:`PAIR_FASTER` of any
+        other).
+        """
+        if spacing <= 0 or self._reverse_at > sent_at:
+            return None
+        line = wire_bytes / spacing
+        if self.rate is None:
+            # No rate known and two packets went at once: the first measure
+            # of the line, a round trip after the first burst (a busy run
+            # needs a queue the round trip shows, 30 s of it at 300 s one
+            # way).  Too high (ACKs bunched), it builds a queue that a busy
+            # run measures.
+            self.rate = line
+            self._epoch += 1
+            return True
+        if line <= self.rate * (PAIR_FASTER_THAN_HINT if self.rate == self.hint else PAIR_FASTER):
+            return False
+        self._raising(now)
+        self.rate = min(line, RAMP_MAX * self.rate)
+        self.raises += 1
+        self._epoch += 1
+        return True
 
     def _raising(self, now: float) -> None:
         """The rate is about to be raised at ``now``: remember where from,

@@ -125,6 +125,59 @@ def test_light_traffic_without_a_hint_stays_unpaced() -> None:
     assert a.statistics().line_rate is None
 
 
+def test_a_rate_hint_ten_times_low_is_corrected_on_a_long_line() -> None:
+    # 20 s one way, told 240 bit/s on a 2400 bit/s line.  Paced at the hint
+    # with a short UART queue, each packet went into an idle line: the ACK
+    # clock showed the handing rate, no round trip came back early enough to
+    # prove more, and the hint stayed in use (5064 s against 543 s).  A rate
+    # pair -- two packets handed at once, their ACKs one real transmit time
+    # apart -- measures the line.  The target: >= 0.8 of exact.
+    exact = _simulate("exact", delay=20.0)
+    low = _simulate("wrong-rate-low", delay=20.0)
+    assert exact.end == low.end == "complete"
+    assert low.ok
+    assert low.seconds <= exact.seconds / 0.8, (low.seconds, exact.seconds)
+
+
+def test_a_rate_pair_raises_a_low_rate_and_settles_a_right_one() -> None:
+    est = RateEstimator(24.0)
+    est.start(0.0, 40.0)
+    # 97 characters 0.42 s apart: the line carries 230 a second.  At most
+    # four times the rate in use per pair (bunched ACKs fake speed).
+    assert est.on_pair(97, 0.42, 10.0, 50.0) is True
+    assert est.rate == 96.0
+    assert est.on_pair(97, 0.42, 60.0, 100.0) is True
+    assert est.rate == pytest.approx(97 / 0.42)
+    assert est.on_pair(97, 0.42, 110.0, 150.0) is False  # no faster: settled
+    assert est.on_pair(97, 0.0, 160.0, 200.0) is None  # read together: no verdict
+    est.reverse(170.0)
+    assert est.on_pair(97, 0.1, 160.0, 210.0) is None  # the peer's data spaced them
+    # Without a rate the first pair's measurement becomes it.
+    unknown = RateEstimator(None)
+    unknown.start(0.0, 40.0)
+    assert unknown.on_pair(129, 0.5375, 1.0, 42.0) is True
+    assert unknown.rate == pytest.approx(240.0)
+
+
+def test_without_hints_a_300_second_line_is_measured_one_round_trip_after_the_first_burst() -> None:
+    # The first window goes out at once, 31 packets of 128: 16 s of queue,
+    # which a 600 s round trip does not show (a busy run needs 5 % of it), so
+    # the rate stayed unknown and the window grew only from what the line
+    # delivered.  The first two packets are a rate pair: their ACKs, one
+    # transmit time apart, measure the line a round trip after they left.
+    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=300.0, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    start = link.now
+    a.send(random.Random(8).randbytes(8000), link.now)
+    link.run_until(lambda: a.statistics().line_rate is not None or link.now > start + 1300)
+    assert link.now < start + 600 + 10  # one round trip and the pair's line time
+    assert a.statistics().line_rate == pytest.approx(RATE, rel=0.05)
+
+
 def test_a_busy_run_measures_the_line_exactly() -> None:
     est = RateEstimator(None)
     est.start(0.0, 2.0)
