@@ -10,10 +10,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 from fuzz import fuzz_arq_receive, fuzz_command_packet, fuzz_parser, fuzz_session
-from fuzz._atheris import corpus_inputs
+from fuzz._atheris import _without_array_leak, corpus_inputs
 
 HARNESSES: dict[str, Callable[[bytes], None]] = {
     "fuzz_parser": fuzz_parser.one_input,
@@ -60,3 +61,19 @@ def test_keyed_session_harness_detects_a_bypass(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(fuzz_session, "KEY", None)
     with pytest.raises(AssertionError, match="without the key"):
         fuzz_session.one_input(b"\x00\x04\x04\x04\x04")
+
+
+def test_comparison_hook_keeps_arrays_from_atheris() -> None:
+    """atheris 3.0.0's native hook leaks non-bool comparison results (numpy
+    arrays): the harnesses' wrapper compares arrays itself, the rest natively."""
+    calls: list[tuple[object, object]] = []
+
+    def native(left: object, right: object, op: int, idx: int, const: bool) -> object:
+        calls.append((left, right))
+        return left == right
+
+    hook = _without_array_leak(native)
+    assert hook(np.arange(3), 1, 2, 0, False).tolist() == [False, True, False]
+    assert hook(1, np.arange(3), 5, 0, False).tolist() == [True, True, False]
+    assert hook(3, 3, 2, 0, False) is True
+    assert calls == [(3, 3)]
