@@ -5,7 +5,19 @@ fuzz input is read as a script of operations on B: well-formed packets of any
 type, sequence number and data (valid block check, so they reach the ARQ
 logic rather than dying in the parser), raw line bytes, time steps that fire
 due timers, application reads and writes on both sides, and honest exchanges
-of what each side queued.  Properties (any violation raises):
+of what each side queued.
+
+Each side's configuration comes first: a flag byte (bit 1: long sequence
+numbers; 0x20: offer the dense encodings; 0x40: the line uses XON/XOFF;
+0x80: ask for CRC-32 -- PROTOCOL.md sections 9 and 10), the window unless
+long, a 16-bit packet length (0xF000 and above: measured, PROTOCOL.md 4.7)
+and the line (even: printable, odd: 8-bit).  Two dense sides agree on the
+escape code (8-bit; with XON/XOFF escaped if either declares it) or the
+radix-91 packing (printable), and on CRC-32 if either asks; forged packets
+are then built with the agreed check, and op 1 encodes a ``D`` packet's data
+with the agreed encoding (after the two high sequence characters, from the
+input, when long sequence numbers are agreed).  Properties (any violation
+raises):
 
 * ``receive_data``, ``handle_timer``, ``data_to_send``, ``read`` and
   ``statistics`` never raise, whatever arrives: a bad packet is counted;
@@ -40,14 +52,27 @@ _TIMER_SPIN_LIMIT = 64
 """Consecutive timer firings at one instant before it counts as a spin."""
 
 
+_DENSE = 0x20
+_XON_XOFF = 0x40
+_CRC32 = 0x80
+_MEASURED = 0xF000
+"""Packet lengths from here on mean "measured" (``max_packet_length=None``)."""
+
+
 def _config(r: Reader) -> EndpointConfig:
     # Half the inputs hint a line 31 packets cannot fill: long sequence
     # numbers (PROTOCOL.md section 9) are negotiated and their heads parsed.
-    long = r.byte() % 2 == 1
+    flags = r.byte()
+    long = flags % 2 == 1
+    window = 31 if long else 1 + r.byte() % 31
+    length = r.u16()
     return EndpointConfig(
-        window=31 if long else 1 + r.byte() % 31,
-        max_packet_length=40 + r.u16() % 1500,
+        window=window,
+        max_packet_length=None if length >= _MEASURED else 40 + length % 1500,
         encoding=(PRINTABLE, EIGHT_BIT_CLEAN)[r.byte() % 2],
+        dense=bool(flags & _DENSE),
+        xon_xoff=bool(flags & _XON_XOFF),
+        check=BlockCheck.CRC32 if flags & _CRC32 else BlockCheck.CRC16,
         one_way_delay=60.0 if long else 1.0,
         line_rate=9600.0 if long else None,
         receive_buffer=2 * 9031,
@@ -89,15 +114,19 @@ def one_input(data: bytes) -> None:
     a = Endpoint(_config(r))
     b = Endpoint(_config(r))
     now = _connect(a, b)
-    check = BlockCheck.CRC16
+    agreed = b.parameters
+    check = agreed.check if agreed is not None else BlockCheck.CRC16
+    long_seq = agreed is not None and agreed.long_seq
     while r.remaining:
         op = r.byte() % 9
         if op in (0, 1):  # a well-formed packet of any type, seq and (encoded or not) data
             ptype = _TYPES[r.byte() % len(_TYPES)]
             seq = r.byte() % 64
             payload = r.take(r.byte()).replace(b"\x01", b"#")  # SOH never inside a packet
-            if op == 1 and ptype == "D":
-                payload = b.parameters.encoding.encode(payload) if b.parameters else payload
+            if op == 1 and ptype == "D" and agreed is not None:
+                payload = agreed.encoding.encode(payload)
+                if long_seq:  # the two high sequence characters (PROTOCOL.md 9)
+                    payload = bytes((32 + r.byte() % 64, 32 + r.byte() % 64)) + payload
             wire_check = check if r.byte() % 8 else BlockCheck.SUM6
             b.receive_data(build_packet(Packet(seq=seq, type=ptype, data=payload), wire_check), now)
         elif op == 2:  # raw bytes on the line

@@ -48,6 +48,18 @@ def _seeds() -> dict[str, dict[str, bytes]]:
     # fuzz_arq_receive: per side window, max length (2 bytes), encoding; then operations.
     small = b"\x07\x00\x80\x00" * 2
     wide = b"\x1e\x05\x00\x01" * 2
+    # Dense sides (flag 0x20; 0x40 XON/XOFF, 0x80 CRC-32, PROTOCOL.md 10), each
+    # configuration: flags, [window unless long], length (2 bytes; >= 0xF000
+    # measured), line (odd: 8-bit).  Then A sends bytes every encoding escapes,
+    # the two exchange, B reads, and a D packet encoded as agreed is forged.
+    escape_8bit = b"\x21\x02\x00\x01" * 2  # long sequence numbers, 552
+    radix_crc32 = b"\xa0\x07\x00\x80\x00" * 2  # window 8, 168, printable
+    xon_measured = b"\x61\xf0\x00\x01" * 2  # long, measured length, 8-bit
+    awkward = bytes((1, 0x18, 0x11, 0x13, 0x91, 0x93, 0xFF, 0, 0x7E, 0x23, 0x26)) * 4
+    dense_ops = (
+        b"\x06" + bytes((len(awkward),)) + awkward + b"\x07\x03\x04\x07\x04\x00"
+        b"\x01\x00\x02\x0b" + awkward[:11]
+    )
     return {
         "fuzz_parser": {
             "seed-data": b"\x00\x80\x03" + data,
@@ -71,6 +83,9 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             + b"y" * 64
             + b"\x07"
             + b"\x00\x02\x01\x00\x01" * 16,
+            "seed-dense-escape": escape_8bit + dense_ops + b"\x00\x00\x01\x07\x04\x00",
+            "seed-dense-radix91-crc32": radix_crc32 + dense_ops + b"\x01\x07\x04\x00",
+            "seed-dense-xon-measured": xon_measured + dense_ops + b"\x00\x00\x01\x07\x04\x00",
         },
         "fuzz_session": {
             "seed-unkeyed-grant": b"\x01\x04\x04\x04\x04\x03\x20\x04",
