@@ -511,6 +511,7 @@ class RateEstimator:
             # run measures.
             self.rate = line
             self._epoch += 1
+            self._rebase()
             return True
         if line <= self.rate * (PAIR_FASTER_THAN_HINT if self.rate == self.hint else PAIR_FASTER):
             return False
@@ -518,7 +519,24 @@ class RateEstimator:
         self.rate = min(line, RAMP_MAX * self.rate)
         self.raises += 1
         self._epoch += 1
+        self._rebase()
         return True
+
+    def _rebase(self) -> None:
+        """The rate was raised past a low one (or set where there was none):
+        judge the base round trip again.
+
+        A sample is plausible down to the init's round trip less the init
+        packets' transmit times *at the rate in use*, and at a rate hint ten
+        times low that is seconds of slack: a packet the model put 5 s late
+        became the base (35.3 s on a 40 s path), every round trip after it
+        looked queued, the pacer was pushed later on each, and the packets
+        after each push looked early enough to ramp the rate to four times
+        the line (0.58 of the limit at 20 s)."""
+        if self.base_rtt is None or self.init_rtt is None or not self.rate:
+            return
+        floor = self.init_rtt - 2 * self._init_bytes / self.rate
+        self.base_rtt = max(self.base_rtt, min(floor, self.init_rtt))
 
     def _raising(self, now: float) -> None:
         """The rate is about to be raised at ``now``: remember where from,

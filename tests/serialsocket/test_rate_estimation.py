@@ -152,6 +152,15 @@ def test_a_rate_pair_raises_a_low_rate_and_settles_a_right_one() -> None:
     assert est.on_pair(97, 0.0, 160.0, 200.0) is None  # read together: no verdict
     est.reverse(170.0)
     assert est.on_pair(97, 0.1, 160.0, 210.0) is None  # the peer's data spaced them
+    # A base round trip taken at the low rate is judged again at the new
+    # one: at 24 characters a second, a sample 5 s short of a 40 s path
+    # passed as plausible (the init's transmit times at that rate).
+    low = RateEstimator(24.0)
+    low.hand(97)
+    low.start(0.0, 40.0)
+    low.base_rtt = 35.0
+    assert low.on_pair(97, 0.42, 10.0, 50.0) is True
+    assert low.base_rtt == pytest.approx(40.0 - 2 * 97 / 96.0)
     # Without a rate the first pair's measurement becomes it.
     unknown = RateEstimator(None)
     unknown.start(0.0, 40.0)
