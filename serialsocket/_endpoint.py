@@ -385,6 +385,7 @@ class Endpoint:
             ceiling=math.inf,  # set with dead_after when a connection starts (_ceiling)
             initial=cfg.initial_timeout(),
         )
+        self._derived_dead_after = cfg.derived_dead_after()  # (once per ACK in _liveness)
         self._counters: dict[str, int] = dict.fromkeys(
             (
                 "packets_sent",
@@ -1405,8 +1406,9 @@ class Endpoint:
             self._measured()
         # A packet of the current length through on its only copy earns the
         # next step up (serialsocket/_length.py); a short tail packet does not.
-        full = 0.9 * (self._length.length + 1)
-        self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
+        if self._adaptive:  # (_adapt_length does nothing otherwise: skip the any())
+            full = 0.9 * (self._length.length + 1)
+            self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
 
     def _rearm_queued(self, now: float, mark: RateMark) -> None:
         """The line is slower than the model that timed the packets in flight:
@@ -1957,7 +1959,7 @@ class Endpoint:
         :data:`UNMEASURED_DEAD_AFTER`, and once the round trip is measured to
         :data:`OUTAGE_ROUND_TRIPS` of it plus two retransmission timeouts."""
         cfg = self.config
-        base = cfg.derived_dead_after()
+        base = self._derived_dead_after
         srtt = self._rtt.srtt
         if srtt is None:
             # A listener that heard the connector's init again and again after
@@ -1979,7 +1981,8 @@ class Endpoint:
         leaves with half of it to spare for its answer, so the verdict needs a
         copy that had ample time and still went unanswered, not merely a timer
         that outgrew the liveness clock."""
-        slow = max(60.0, 8 * self.config.initial_timeout(), 2 * self._rtt.base_timeout())
+        # (_rtt.initial is the configuration's initial_timeout(), computed once.)
+        slow = max(60.0, 8 * self._rtt.initial, 2 * self._rtt.base_timeout())
         return min(slow, self._dead_after / 2)
 
     def _measured(self) -> None:

@@ -206,7 +206,10 @@ def _crc16_packet(seq: int, type_c: int, data: bytes) -> bytes:
     Raises:
         LocalProtocolError: the field is larger than an extended packet carries.
     """
-    marked, head_crc = _crc16_head(seq, type_c, len(data))
+    head = _HEADS.get(len(data) << 14 | type_c << 6 | seq)  # (_crc16_head's key, inline)
+    if head is None:
+        head = _crc16_head(seq, type_c, len(data))
+    marked, head_crc = head
     crc = _CRC16_FUN(data, head_crc, _CRC16_TABLE)
     return b"".join(
         (marked, data, bytes(((crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32, CR)))

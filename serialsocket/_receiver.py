@@ -20,7 +20,9 @@ tokens never span packets, so decoding the concatenation is exact and lets the
 vectorised decoder work on large inputs.  The fields of all the packets one
 read delivered are decoded together too (:meth:`Receiver.take_fields`
 defers them, the endpoint calls :meth:`Receiver.flush` at the end of the
-read): one decoder call per read instead of one per packet.  A field is
+read): one decoder call per read instead of one per packet (fields too
+short for the vectorised decoder on their own; longer ones gain nothing
+from company and are decoded at once).  A field is
 deferred only when it cannot fail to decode and decodes to at most its own
 length, so the window every ACK advertises is computed exactly as if it had
 been decoded at once (from a bound when that settles it, else after a flush).
@@ -40,7 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ._encoding import Encoding
+from ._encoding import _VECTOR_FROM, Encoding
 from ._params import DataCodec  # the negotiated codec may be a dense one
 
 __all__ = ["Arrival", "Receiver"]
@@ -159,6 +161,7 @@ class Receiver:
         if (
             not self.discard
             and type(encoding) is Encoding
+            and all(len(f) < _VECTOR_FROM for f in fields)
             and all(map(encoding.plain_whole, fields))
         ):
             # Decoded with the rest of this read's fields (flush): a field

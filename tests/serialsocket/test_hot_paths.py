@@ -1,14 +1,18 @@
-"""The receive path's batched decoding against decoding every packet at once.
+"""The per-packet fast paths against the plain ones they stand for.
 
-``Receiver.take_fields`` defers the fields an ``Encoding`` can vouch for
+Batched decoding: ``Receiver.take_fields`` defers the fields an ``Encoding`` can vouch for
 (``Encoding.plain_whole``) and ``Receiver.flush`` decodes them together at
 the end of a read; the window each ACK advertises, the classification of
 every packet and the bytes delivered must be exactly those of the reference
 path, which decodes each arrival on the spot (any codec that is not exactly
-``Encoding`` takes it: a subclass here).
+``Encoding`` takes it: a subclass here).  Packets built without a
+``Packet`` (``_crc16_packet``) equal ``build_packet``'s; a ``RateMark``
+built through its slots equals the dataclass's own.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import pytest
 from hypothesis import given
@@ -17,6 +21,7 @@ from hypothesis import strategies as st
 from serialsocket import MalformedDataError
 from serialsocket._encoding import _reference_decode
 from serialsocket._packet import _crc16_packet
+from serialsocket._rate import RateEstimator, RateMark
 from serialsocket._receiver import Receiver
 from serialsocket.packets import PRINTABLE, Encoding, Packet, build_packet
 
@@ -144,3 +149,24 @@ def test_deferred_decoding_matches_decoding_at_once(
 def test_crc16_packet_matches_build_packet(seq: int, ptype: str, field: bytes) -> None:
     expected = build_packet(Packet(seq=seq, type=ptype, data=field))
     assert _crc16_packet(seq, ord(ptype), field) == expected
+
+
+def test_rate_mark_built_through_its_slots_has_every_field() -> None:
+    rate = RateEstimator(hint=None)
+    assert rate.mark(1.0) is None  # before the connection
+    rate.hand(100)
+    rate.start(2.0, base_rtt=0.5)
+    rate.hand(40)
+    mark = rate.mark(3.0)
+    assert mark == RateMark(
+        handed_end=140,
+        point_time=2.0,
+        point_handed=100,
+        point_queued=False,
+        point_sent=1.5,
+        sent_at=3.0,
+        epoch=0,
+    )
+    # A field added to RateMark must be set by mark() too (an unset slot raises).
+    for f in dataclasses.fields(RateMark):
+        getattr(mark, f.name)
