@@ -701,6 +701,16 @@ class Endpoint:
         return len(self._control)
 
     @property
+    def input_held(self) -> int:
+        """Bytes :meth:`receive_data` holds: the start of a packet still arriving.
+
+        An I/O loop can compare it around :meth:`receive_data`: when it grew
+        by all the bytes fed, they completed no packet (and no rejection),
+        so nothing else changed and nobody needs waking.
+        """
+        return self._parser.buffered
+
+    @property
     def readable(self) -> int:
         """Bytes :meth:`read` would return now."""
         return len(self._receiver.readable)

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from serialsocket import MalformedDataError
+from serialsocket import Endpoint, EndpointConfig, MalformedDataError
 from serialsocket._encoding import _reference_decode
 from serialsocket._packet import _crc16_packet
 from serialsocket._rate import RateEstimator, RateMark
@@ -170,3 +170,18 @@ def test_rate_mark_built_through_its_slots_has_every_field() -> None:
     # A field added to RateMark must be set by mark() too (an unset slot raises).
     for f in dataclasses.fields(RateMark):
         getattr(mark, f.name)
+
+
+def test_input_held_tells_a_partial_packet_from_a_whole_one() -> None:
+    # The driver wakes nobody when a read only extended a packet still
+    # arriving: input_held grew by every byte fed.
+    ep = Endpoint(EndpointConfig())
+    ep.listen()
+    wire = build_packet(Packet(seq=0, type="D", data=b"ab"))
+    ep.receive_data(wire[:4], 0.0)
+    assert ep.input_held == 4
+    ep.receive_data(wire[4:-2], 0.0)  # all but the last check character and the CR
+    assert ep.input_held == len(wire) - 2
+    ep.receive_data(wire[-2:], 0.0)  # the packet is whole, the CR skipped as filler
+    assert ep.input_held == 0
+    assert ep.statistics().packets_received == 1
