@@ -211,9 +211,13 @@ def _crc16_packet(seq: int, type_c: int, data: bytes) -> bytes:
         head = _crc16_head(seq, type_c, len(data))
     marked, head_crc = head
     crc = _CRC16_FUN(data, head_crc, _CRC16_TABLE)
-    return b"".join(
-        (marked, data, bytes(((crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32, CR)))
-    )
+    return b"".join((marked, data, _CHECK_HIGH[crc >> 6], _CHECK_LOW_CR[crc & 0x3F]))
+
+
+_CHECK_HIGH = tuple(bytes(((h >> 6) + 32, (h & 0x3F) + 32)) for h in range(1 << 10))
+"""The first two CRC-16 check characters, by the CRC's top ten bits."""
+_CHECK_LOW_CR = tuple(bytes((low + 32, CR)) for low in range(64))
+"""The third check character and the CR, by the CRC's low six bits."""
 
 
 def _header(seq: int, type_c: int, data_length: int, check_length: int) -> tuple[bytes, int]:

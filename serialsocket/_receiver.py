@@ -158,19 +158,20 @@ class Receiver:
         fields = arrival.fields
         if not fields:
             return 0
-        if (
-            not self.discard
-            and type(encoding) is Encoding
-            and all(len(f) < _VECTOR_FROM for f in fields)
-            and all(map(encoding.plain_whole, fields))
-        ):
-            # Decoded with the rest of this read's fields (flush): a field
-            # that passed plain_whole cannot fail, and counts at its length.
-            self.pending += fields
-            self.pending_chars += sum(map(len, fields))
-            self._pending_codec = encoding
-            fields.clear()
-            return 0
+        if not self.discard and type(encoding) is Encoding:
+            chars = 0
+            for f in fields:  # (a loop, not all(): usually one field)
+                if len(f) >= _VECTOR_FROM or not encoding.plain_whole(f):
+                    break
+                chars += len(f)
+            else:
+                # Decoded with the rest of this read's fields (flush): a field
+                # that passed plain_whole cannot fail, and counts at its length.
+                self.pending += fields
+                self.pending_chars += chars
+                self._pending_codec = encoding
+                fields.clear()
+                return 0
         if self.pending:
             self.flush()
         # decode_fields, not decode(join): radix-91 fields end in their own tails.

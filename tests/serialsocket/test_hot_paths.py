@@ -23,10 +23,11 @@ from serialsocket._encoding import _reference_decode
 from serialsocket._packet import _crc16_packet
 from serialsocket._rate import RateEstimator, RateMark
 from serialsocket._receiver import Receiver
-from serialsocket.packets import PRINTABLE, Encoding, Packet, build_packet
+from serialsocket._wire import CR
+from serialsocket.packets import PRINTABLE, BlockCheck, Encoding, Packet, build_packet
 
 from .strategies import encodings, payloads
-from .test_codec_fast import outcome, prefix_soup
+from .test_codec_fast import outcome, prefix_soup, reference_build
 
 
 class _AtOnce(Encoding):
@@ -146,9 +147,13 @@ def test_deferred_decoding_matches_decoding_at_once(
     ptype=st.sampled_from(["D", "Y", "N", "Z"]),
     field=st.binary(max_size=600).map(PRINTABLE.encode),
 )
-def test_crc16_packet_matches_build_packet(seq: int, ptype: str, field: bytes) -> None:
-    expected = build_packet(Packet(seq=seq, type=ptype, data=field))
+def test_crc16_packet_matches_the_reference_build(seq: int, ptype: str, field: bytes) -> None:
+    # (build_packet with CR and no padding takes _crc16_packet itself: the
+    # reference is the one-field-at-a-time definition.)
+    packet = Packet(seq=seq, type=ptype, data=field)
+    expected = reference_build(packet, BlockCheck.CRC16, CR, b"")
     assert _crc16_packet(seq, ord(ptype), field) == expected
+    assert build_packet(packet) == expected
 
 
 def test_rate_mark_built_through_its_slots_has_every_field() -> None:
