@@ -576,10 +576,12 @@ class Encoding:
             return True
         pair = cls[:-2] * 4 + cls[1:-1]
         for _ in range(_MAX_ROUNDS):
-            new = _lookup(_T2_TRANS, st[:-2] * 16 + pair)
-            if np.array_equal(new, st[2:]):
+            # _lookup written out, compared as bytes: np.array_equal's own
+            # checks cost more than the comparison on a field of a few KB.
+            new = (st[:-2] * 16 + pair).tobytes().translate(_T2_TRANS)
+            if new == st[2:].tobytes():
                 return True
-            st[2:] = new
+            st[2:] = np.frombuffer(new, np.int8)
         return False
 
     @staticmethod
@@ -618,9 +620,12 @@ class Encoding:
         literal = np.empty(n, dtype=np.bool_)
         literal[:-1] = st[1:] == _S0
         literal[-1] = True
-        count_at = np.flatnonzero(st == _COUNT)
+        # (The arrays' own methods: np.flatnonzero and np.compress add a
+        # Python wrapper each, a few us on a field of a few KB.)
+        count_at = (st == _COUNT).nonzero()[0]
         if count_at.size == 0:
-            return np.compress(literal, value).tobytes()
+            out: bytes = value.compress(literal).tobytes()
+            return out
         counts = arr[count_at].astype(np.int64) - 32
         if counts.min() < 1 or counts.max() > _MAX_RUN:
             raise _bad_count()
