@@ -134,8 +134,14 @@ class _Driver:
                 return
             self.reads += 1
             self.bytes_in += len(data)
+            held = self.ep.input_held
             self.ep.receive_data(data, self.now())
-            self.after_input()
+            if self.ep.input_held < held + len(data):
+                self.after_input()
+            # Else the bytes only extended a packet still arriving (a long
+            # packet comes in several reads from a pty: 4 KB at most): no
+            # waiter's condition changed, and waking them all cost two task
+            # switches per read.
 
     async def _writer(self) -> None:
         while True:

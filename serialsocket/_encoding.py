@@ -118,6 +118,17 @@ _T = np.array(
     dtype=np.int8,
 )
 
+_T_TUPLE: tuple[tuple[int, ...], ...] = tuple(tuple(int(x) for x in row) for row in _T)
+"""``_T`` as Python ints, for the few steps :meth:`Encoding.plain_whole` takes."""
+
+_UNKNOWN = -1
+"""Not a decoder state: :meth:`Encoding._state_at` could not tell."""
+
+_PLAIN_CHAIN_MAX = 8
+"""Prefix characters in a row :meth:`Encoding.plain_whole` reads before it
+gives up (a real encoder writes at most three, ``&#&`` for 0xA6, and a
+fourth character before a quoted REPT: ``&#~``)."""
+
 _T_FLAT = _T.ravel()
 """Row-major flattening: ``_T_FLAT[state * 4 + class]`` is a 1-D gather."""
 _T_TRANS = _T_FLAT.tobytes().ljust(256, b"\0")
@@ -509,6 +520,46 @@ class Encoding:
             raise _dangling()
         return self._emit_decoded(raw, st)
 
+    def plain_whole(self, field: bytes) -> bool:
+        """``field`` holds no repeat token and ends on a token boundary.
+
+        Such a field decodes without error (every token is whole) to at most
+        ``len(field)`` bytes (only a repeat token yields more bytes than it
+        has characters), so a receiver may count it against its buffer at
+        ``len(field)`` and decode it later together with the fields that
+        follow it (``Receiver.take_fields``).  False says nothing: decode it
+        now.  Cheap for real fields: it reads only the REPT characters (a
+        quoted ``~`` in binary data) and the field's end, each with the
+        prefix characters just before it.
+        """
+        rept = self.rept
+        if rept is not None:
+            at = field.find(rept)
+            while at >= 0:
+                if self._state_at(field, at) in (_S0, _UNKNOWN):
+                    return False  # a repeat prefix (or too long a chain to tell)
+                at = field.find(rept, at + 1)
+        return self._state_at(field, len(field)) == _S0
+
+    def _state_at(self, field: bytes, at: int) -> int:
+        """The decoder's state before ``field[at]`` (``_S0``: a token starts
+        there), read from the chain of prefix characters just before it, for
+        a field with no repeat token before ``at``; ``_UNKNOWN`` when the
+        chain is longer than :data:`_PLAIN_CHAIN_MAX` (the caller gives up)."""
+        qctl, qbin, rept = self.qctl, self.qbin, self.rept
+        i = at
+        while i and (field[i - 1] == qctl or field[i - 1] == qbin or field[i - 1] == rept):
+            i -= 1
+            if at - i > _PLAIN_CHAIN_MAX:
+                return _UNKNOWN
+        # The character before the chain is an ordinary one that is not a
+        # repeat count (no repeat token comes before): a token ends there.
+        state = _S0
+        for c in field[i:at]:
+            cls = _C_QCTL if c == qctl else _C_QBIN if c == qbin else _C_REPT
+            state = _T_TUPLE[state][cls]
+        return state
+
     def _decode_split(self, raw: bytes) -> bytes:
         """Short fields: tokenise with one regular expression, look tokens up."""
         table = _split_table(self.qctl, self.qbin, self.rept)
@@ -572,10 +623,12 @@ class Encoding:
             return True
         pair = cls[:-2] * 4 + cls[1:-1]
         for _ in range(_MAX_ROUNDS):
-            new = _lookup(_T2_TRANS, st[:-2] * 16 + pair)
-            if np.array_equal(new, st[2:]):
+            # _lookup written out, compared as bytes: np.array_equal's own
+            # checks cost more than the comparison on a field of a few KB.
+            new = (st[:-2] * 16 + pair).tobytes().translate(_T2_TRANS)
+            if new == st[2:].tobytes():
                 return True
-            st[2:] = new
+            st[2:] = np.frombuffer(new, np.int8)
         return False
 
     @staticmethod
@@ -614,9 +667,12 @@ class Encoding:
         literal = np.empty(n, dtype=np.bool_)
         literal[:-1] = st[1:] == _S0
         literal[-1] = True
-        count_at = np.flatnonzero(st == _COUNT)
+        # (The arrays' own methods: np.flatnonzero and np.compress add a
+        # Python wrapper each, a few us on a field of a few KB.)
+        count_at = (st == _COUNT).nonzero()[0]
         if count_at.size == 0:
-            return np.compress(literal, value).tobytes()
+            out: bytes = value.compress(literal).tobytes()
+            return out
         counts = arr[count_at].astype(np.int64) - 32
         if counts.min() < 1 or counts.max() > _MAX_RUN:
             raise _bad_count()

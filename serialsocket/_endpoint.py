@@ -73,7 +73,7 @@ from ._latest import (
 )
 from ._length import LADDER, LengthChooser
 from ._pacer import TIME_EPSILON, Pacer
-from ._packet import Packet, build_packet, data_capacity
+from ._packet import Packet, _crc16_packet, build_packet, data_capacity
 from ._params import (
     EARLY_ENCODING,
     EARLY_INIT_LIMIT,
@@ -123,6 +123,25 @@ _DAMAGE = frozenset(
         RejectReason.TOO_LONG,
     }
 )
+_CRC16 = BlockCheck.CRC16
+_ACK_C = ord(PacketType.ACK)
+_DATA_C = ord(PacketType.DATA)
+_ESTABLISHED = State.ESTABLISHED
+_FAILED = State.FAILED
+_T_INIT = PacketType.INIT
+_T_ERROR = PacketType.ERROR
+_T_ACK = PacketType.ACK
+_T_NAK = PacketType.NAK
+_T_DATA = PacketType.DATA
+_T_EOF = PacketType.EOF
+"""(Enum member lookups cost a descriptor call each in Python 3.11: the
+per-packet paths use these.)"""
+
+_ACKS: dict[int, bytes] = {}
+_ACKS_BOUND = 4096
+"""Cached plain CRC-16 ACKs (``_queue_ack``): one per (SEQ, next expected,
+window) in use -- a few hundred on a steady link; cleared when full."""
+
 _ERROR_TEXT_MAX = 80
 """E-packet reasons are cut to this many characters: one normal packet, readable in a trace."""
 
@@ -375,6 +394,7 @@ class Endpoint:
             ceiling=math.inf,  # set with dead_after when a connection starts (_ceiling)
             initial=cfg.initial_timeout(),
         )
+        self._derived_dead_after = cfg.derived_dead_after()  # (once per ACK in _liveness)
         self._counters: dict[str, int] = dict.fromkeys(
             (
                 "packets_sent",
@@ -690,6 +710,16 @@ class Endpoint:
         return len(self._control)
 
     @property
+    def input_held(self) -> int:
+        """Bytes :meth:`receive_data` holds: the start of a packet still arriving.
+
+        An I/O loop can compare it around :meth:`receive_data`: when it grew
+        by all the bytes fed, they completed no packet (and no rejection),
+        so nothing else changed and nobody needs waking.
+        """
+        return self._parser.buffered
+
+    @property
     def readable(self) -> int:
         """Bytes :meth:`read` would return now."""
         return len(self._receiver.readable)
@@ -736,23 +766,35 @@ class Endpoint:
 
     def receive_data(self, data: bytes | bytearray | memoryview, now: float) -> None:
         """Feed bytes read from the line."""
-        self._counters["wire_bytes_received"] += len(data)
-        self._parser.receive_data(data)
-        while (event := self._parser.next_event()) is not None:
+        counters = self._counters
+        counters["wire_bytes_received"] += len(data)
+        parser = self._parser
+        parser.receive_data(data)
+        try:
+            self._receive_events(parser, counters, now)
+        finally:
+            # The data fields of this read, decoded together (Receiver.take_fields).
+            if self._receiver.pending:
+                self._receiver.flush()
+
+    def _receive_events(self, parser: PacketParser, counters: dict[str, int], now: float) -> None:
+        """Handle the packets and rejections :meth:`receive_data` parsed."""
+        while (event := parser.next_event()) is not None:
             if isinstance(event, PacketReceived):
-                self._counters["packets_received"] += 1
+                counters["packets_received"] += 1
                 self._last_heard = now
                 try:
                     self._on_packet(event.packet, now)
                 except RemoteProtocolError as exc:
                     log.warning("protocol error from peer: %s", exc)
                     self._finish_abort(exc.error_hint, by_peer=False, send=True)
-                self._note_close_progress(now)
-            elif event.reason in _DAMAGE and self._state is State.ESTABLISHED:
+                if self._close_deadline != math.inf:
+                    self._note_close_progress(now)
+            elif event.reason in _DAMAGE and self._state is _ESTABLISHED:
                 nak = self._receiver.gap_to_nak(now, self._rtt.timeout())
                 if nak is not None:
                     self._queue_nak(nak)
-            if self._state in DEAF:
+            if self._state is not _ESTABLISHED and self._state in DEAF:
                 break
 
     def data_to_send(self, now: float) -> bytes:
@@ -1217,9 +1259,10 @@ class Endpoint:
 
     def _on_packet(self, packet: Packet, now: float) -> None:
         ptype = packet.type
-        if self._state is State.FAILED:
+        state = self._state
+        if state is _FAILED:
             if (
-                ptype != PacketType.ERROR
+                ptype != _T_ERROR
                 and self._abort_reason is not None
                 and now - self._error_sent_at >= self._rtt.timeout()
             ):
@@ -1230,8 +1273,8 @@ class Endpoint:
         if (
             self._answers >= 1
             and self._rtt.srtt is None
-            and self._state is State.ESTABLISHED
-            and ptype != PacketType.INIT
+            and state is _ESTABLISHED
+            and ptype != _T_INIT
         ):
             # The first packet the connector sent after our first answer: the
             # round trip is at most this (the connector may have waited, or
@@ -1243,18 +1286,28 @@ class Endpoint:
             if self._answers == 1:
                 self._rate.seed_base(now - self._answer_sent_at)
             self._measured()
-        if ptype == PacketType.INIT:
+        if ptype in (_T_DATA, _T_EOF):
+            # Data first: once per packet of a transfer (then its ACK, below).
+            # (ESTABLISHED is CONNECTED: tested first, as a frozenset lookup
+            # hashes the enum member in Python.)
+            connected = self._state is _ESTABLISHED or self._state in CONNECTED
+            if connected and (split := self._split_seq(packet)) is not None:
+                self._rate.reverse(now)
+                self._on_data(split[0], split[1], ptype == _T_EOF, now)
+        elif ptype == _T_ACK:
+            if len(packet.data) >= _INIT_MIN_FIELD:
+                self._on_init_answer(packet, now)
+            elif (self._state is _ESTABLISHED or self._state in CONNECTED) and (
+                split := self._split_seq(packet)
+            ) is not None:
+                self._on_ack(split[0], split[1], now)
+        elif ptype == _T_INIT:
             self._on_init(packet, now)
-        elif ptype == PacketType.ERROR:
+        elif ptype == _T_ERROR:
             if self._state in PEER_MAY_ABORT:
                 reason = self._safe_text(packet.data)
                 self._finish_abort(reason, by_peer=True, send=False)
-        elif ptype == PacketType.ACK:
-            if len(packet.data) >= _INIT_MIN_FIELD:
-                self._on_init_answer(packet, now)
-            elif self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
-                self._on_ack(split[0], split[1], now)
-        elif ptype == PacketType.NAK:
+        elif ptype == _T_NAK:
             if self._state is State.ESTABLISHED and (split := self._split_seq(packet)) is not None:
                 self._counters["naks_received"] += 1
                 acked = self._sender.packets_acked
@@ -1262,10 +1315,6 @@ class Endpoint:
                 self._take_samples(now)
                 if self._sender.packets_acked > acked:  # stop-and-wait NAK(n+1) = ACK(n)
                     self._rtt.on_progress()
-        elif ptype in (PacketType.DATA, PacketType.EOF):
-            if self._state in CONNECTED and (split := self._split_seq(packet)) is not None:
-                self._rate.reverse(now)
-                self._on_data(split[0], split[1], ptype == PacketType.EOF, now)
         elif ptype in (URGENT, URGENT_ACK) and self.expedited and self._state in CONNECTED:
             if ptype == URGENT:
                 self._rate.reverse(now)
@@ -1383,8 +1432,9 @@ class Endpoint:
             self._measured()
         # A packet of the current length through on its only copy earns the
         # next step up (serialsocket/_length.py); a short tail packet does not.
-        full = 0.9 * (self._length.length + 1)
-        self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
+        if self._adaptive:  # (_adapt_length does nothing otherwise: skip the any())
+            full = 0.9 * (self._length.length + 1)
+            self._adapt_length(clean=any(len(pkt.wire) >= full for pkt in delivered))
 
     def _pair_verdict(self, pkt: Outstanding, now: float) -> None:
         """``pkt``'s first copy was acknowledged at ``now``: if it is the second
@@ -1684,6 +1734,19 @@ class Endpoint:
     def _queue_ack(self, seq_mod: int, *, poll: bool = False) -> None:
         window = self._receiver.window_to_advertise()
         self._receiver.advertised = window
+        if not self._long_seq and not poll and self._send_check is _CRC16 and window < 128:
+            # The common case, once per data packet: a plain ACK under CRC-16
+            # is one of 64 x 64 x 32 packets (SEQ, next expected, window).
+            key = (seq_mod % 64) << 13 | (self._receiver.expected % 64) << 7 | window
+            wire = _ACKS.get(key)
+            if wire is None:
+                data = bytes((tochar(self._receiver.expected % 64), tochar(window)))
+                wire = _crc16_packet(seq_mod % 64, _ACK_C, data)
+                if len(_ACKS) >= _ACKS_BOUND:
+                    _ACKS.clear()
+                _ACKS[key] = wire
+            self._control.append(wire)
+            return
         seq, head = self._seq_fields(seq_mod)
         if self._long_seq:
             expected = encode18(self._receiver.expected % LONG_SEQ_MODULUS)
@@ -1850,11 +1913,17 @@ class Endpoint:
             if s.queue:
                 batch = self._pacer.batch(room, now)
                 capacity = self._carried(self._length.length)
+                short = not self._long_seq and self._send_check is _CRC16
                 for field, used in self._encoding.encode_fields(s.queue, capacity, batch):
-                    seq, head = self._seq_fields(s.next)
-                    wire = build_packet(
-                        Packet(seq=seq, type=PacketType.DATA, data=head + field), self._send_check
-                    )
+                    if short:
+                        # The encoder's field holds no MARK: no Packet to check it.
+                        wire = _crc16_packet(s.next % 64, _DATA_C, field)
+                    else:
+                        seq, head = self._seq_fields(s.next)
+                        wire = build_packet(
+                            Packet(seq=seq, type=PacketType.DATA, data=head + field),
+                            self._send_check,
+                        )
                     del s.queue[:used]
                     # Exposure counts first sends and resends, whose losses
                     # show; an idle copy's or a doubled resend's would not.
@@ -2007,7 +2076,7 @@ class Endpoint:
         :data:`UNMEASURED_DEAD_AFTER`, and once the round trip is measured to
         :data:`OUTAGE_ROUND_TRIPS` of it plus two retransmission timeouts."""
         cfg = self.config
-        base = cfg.derived_dead_after()
+        base = self._derived_dead_after
         srtt = self._rtt.srtt
         if srtt is None:
             # A listener that heard the connector's init again and again after
@@ -2029,7 +2098,8 @@ class Endpoint:
         leaves with half of it to spare for its answer, so the verdict needs a
         copy that had ample time and still went unanswered, not merely a timer
         that outgrew the liveness clock."""
-        slow = max(60.0, 8 * self.config.initial_timeout(), 2 * self._rtt.base_timeout())
+        # (_rtt.initial is the configuration's initial_timeout(), computed once.)
+        slow = max(60.0, 8 * self._rtt.initial, 2 * self._rtt.base_timeout())
         return min(slow, self._dead_after / 2)
 
     def _measured(self) -> None:

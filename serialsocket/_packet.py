@@ -157,17 +157,12 @@ def build_packet(
     """
     data = packet.data
     if check is _CRC16:
-        # The common case: the header (MARK through HCHECK) and its CRC depend
-        # only on SEQ, TYPE and the field's length, so they are cached; the
-        # CRC then continues over the data alone.
-        key = len(data) << 14 | ord(packet.type) << 6 | packet.seq
-        head = _HEADS.get(key)
-        if head is None:
-            head = _header(packet.seq, ord(packet.type), len(data), 3)
-            if len(_HEADS) >= _HEADS_BOUND:
-                _HEADS.clear()
-            _HEADS[key] = head
-        marked, head_crc = head
+        if eol == CR and not padding:
+            return _crc16_packet(packet.seq, ord(packet.type), data)
+        # The header (MARK through HCHECK) and its CRC depend only on SEQ,
+        # TYPE and the field's length, so they are cached; the CRC then
+        # continues over the data alone.
+        marked, head_crc = _crc16_head(packet.seq, ord(packet.type), len(data))
         crc = _CRC16_FUN(data, head_crc, _CRC16_TABLE)
         c1, c2, c3 = (crc >> 12) + 32, (crc >> 6 & 0x3F) + 32, (crc & 0x3F) + 32
         tail = bytes((c1, c2, c3)) if eol is None else bytes((c1, c2, c3, eol))
@@ -184,6 +179,45 @@ _HEADS: dict[int, tuple[bytes, int]] = {}
 _HEADS_BOUND = 4096
 """Cached CRC-16 headers: 64 sequence numbers times the few (type, length)
 pairs a sender uses -- a few hundred in practice; cleared when full."""
+
+
+def _crc16_head(seq: int, type_c: int, data_length: int) -> tuple[bytes, int]:
+    """MARK through HCHECK of a CRC-16 packet and the CRC of LEN..HCHECK, cached.
+
+    Raises:
+        LocalProtocolError: the field is larger than an extended packet carries.
+    """
+    key = data_length << 14 | type_c << 6 | seq
+    head = _HEADS.get(key)
+    if head is None:
+        head = _header(seq, type_c, data_length, 3)
+        if len(_HEADS) >= _HEADS_BOUND:
+            _HEADS.clear()
+        _HEADS[key] = head
+    return head
+
+
+def _crc16_packet(seq: int, type_c: int, data: bytes) -> bytes:
+    """``build_packet(Packet(seq=seq, type=chr(type_c), data=data))``: CRC-16,
+    CR after it, no padding -- for fields the caller has made valid (``seq``
+    in 0..63, ``type_c`` printable, no MARK in ``data``: an encoder's output).
+    Once per packet on the send path, without the :class:`Packet`.
+
+    Raises:
+        LocalProtocolError: the field is larger than an extended packet carries.
+    """
+    head = _HEADS.get(len(data) << 14 | type_c << 6 | seq)  # (_crc16_head's key, inline)
+    if head is None:
+        head = _crc16_head(seq, type_c, len(data))
+    marked, head_crc = head
+    crc = _CRC16_FUN(data, head_crc, _CRC16_TABLE)
+    return b"".join((marked, data, _CHECK_HIGH[crc >> 6], _CHECK_LOW_CR[crc & 0x3F]))
+
+
+_CHECK_HIGH = tuple(bytes(((h >> 6) + 32, (h & 0x3F) + 32)) for h in range(1 << 10))
+"""The first two CRC-16 check characters, by the CRC's top ten bits."""
+_CHECK_LOW_CR = tuple(bytes((low + 32, CR)) for low in range(64))
+"""The third check character and the CR, by the CRC's low six bits."""
 
 
 def _header(seq: int, type_c: int, data_length: int, check_length: int) -> tuple[bytes, int]:

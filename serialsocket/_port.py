@@ -243,7 +243,25 @@ class _FdTransport:
         await self._stream.wait_send_all_might_not_block()
 
     async def receive_some(self, max_bytes: int) -> bytes:
-        return await self._stream.receive_some(max_bytes)
+        # Wait until the fd is readable, then read: one trip through the
+        # scheduler per read (a checkpoint).  FdStream.receive_some
+        # checkpoints, reads, and on EAGAIN -- the usual case for a reader
+        # that keeps up -- waits and reads again: two trips and a failed
+        # read per call.  Its errors are kept: EBADF (closed) and the rest.
+        stream = self._stream
+        while True:
+            fd = stream.fileno()  # -1 once closed
+            if fd < 0:
+                raise trio.ClosedResourceError("file was already closed")
+            await trio.lowlevel.wait_readable(fd)  # ClosedResourceError if closed meanwhile
+            try:
+                return os.read(fd, max_bytes)
+            except BlockingIOError:
+                continue  # another reader of the device took the bytes
+            except OSError as exc:
+                if exc.errno == errno.EBADF:
+                    raise trio.ClosedResourceError("file was already closed") from None
+                raise trio.BrokenResourceError from exc
 
     async def aclose(self) -> None:
         self._stream.close()  # notifies any task blocked on the fd

@@ -17,7 +17,15 @@ wire number ``s`` is classified against it (C-Kermit's chkwin, ckcfn3.c):
 Packets are delivered in order as soon as ``expected`` is present, so every
 byte is delivered exactly once.  Consecutive fields are decoded together:
 tokens never span packets, so decoding the concatenation is exact and lets the
-vectorised decoder work on large inputs.
+vectorised decoder work on large inputs.  The fields of all the packets one
+read delivered are decoded together too (:meth:`Receiver.take_fields`
+defers them, the endpoint calls :meth:`Receiver.flush` at the end of the
+read): one decoder call per read instead of one per packet (fields too
+short for the vectorised decoder on their own; longer ones gain nothing
+from company and are decoded at once).  A field is
+deferred only when it cannot fail to decode and decodes to at most its own
+length, so the window every ACK advertises is computed exactly as if it had
+been decoded at once (from a bound when that settles it, else after a flush).
 
 NAK policy (C-Kermit's selective repeat): when a packet arrives beyond a gap,
 NAK the oldest missing packet not NAKed within the last timeout; when a
@@ -34,6 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ._encoding import _VECTOR_FROM, Encoding
 from ._params import DataCodec  # the negotiated codec may be a dense one
 
 __all__ = ["Arrival", "Receiver"]
@@ -81,6 +90,11 @@ class Receiver:
         self.delivered_total = 0
         self.discarded_total = 0
         self.advertised = 0
+        self.pending: list[bytes] = []
+        """Fields delivered in order and not decoded yet (:meth:`flush`)."""
+        self.pending_chars = 0
+        """Their characters: at least the bytes they decode to."""
+        self._pending_codec: DataCodec | None = None
 
     # -- classification ------------------------------------------------------------
 
@@ -111,7 +125,7 @@ class Receiver:
             return Arrival(classification="outside")
         if seq in self.buffered:
             return Arrival(ack=seq_mod, classification="duplicate")
-        if not eof and not self.discard and len(field) > self.free():
+        if not eof and not self.discard and not self._fits(len(field)):
             return Arrival(classification="full")
         self.buffered[seq] = _EOF if eof else field
         if not eof:
@@ -141,11 +155,28 @@ class Receiver:
         Raises:
             MalformedDataError: a field with a valid check does not decode.
         """
-        if not arrival.fields:
+        fields = arrival.fields
+        if not fields:
             return 0
+        if not self.discard and type(encoding) is Encoding:
+            chars = 0
+            for f in fields:  # (a loop, not all(): usually one field)
+                if len(f) >= _VECTOR_FROM or not encoding.plain_whole(f):
+                    break
+                chars += len(f)
+            else:
+                # Decoded with the rest of this read's fields (flush): a field
+                # that passed plain_whole cannot fail, and counts at its length.
+                self.pending += fields
+                self.pending_chars += chars
+                self._pending_codec = encoding
+                fields.clear()
+                return 0
+        if self.pending:
+            self.flush()
         # decode_fields, not decode(join): radix-91 fields end in their own tails.
-        data = encoding.decode_fields(arrival.fields)
-        arrival.fields.clear()
+        data = encoding.decode_fields(fields)
+        fields.clear()
         if self.discard:
             self.discarded_total += len(data)
             return 0
@@ -154,9 +185,22 @@ class Receiver:
         arrival.delivered = len(data)
         return len(data)
 
+    def flush(self) -> None:
+        """Decode the deferred fields (:meth:`take_fields`) and make them readable."""
+        pending, codec = self.pending, self._pending_codec
+        if not pending or codec is None:
+            return
+        data = codec.decode_fields(pending)
+        pending.clear()
+        self.pending_chars = 0
+        self.readable += data
+        self.delivered_total += len(data)
+
     def deliver(self, data: bytes) -> None:
         """Make bytes that came outside any data packet readable, ahead of
         everything that follows (early data, PROTOCOL.md section 13)."""
+        if self.pending:
+            self.flush()
         if self.discard:
             self.discarded_total += len(data)
             return
@@ -187,16 +231,33 @@ class Receiver:
 
     def free(self) -> int:
         """Bytes of room left for received data."""
+        if self.pending:
+            self.flush()
         return max(self.receive_buffer - len(self.readable) - self.buffered_bytes, 0)
+
+    def _free_at_least(self) -> int:
+        """A lower bound of :meth:`free` that decodes nothing: deferred
+        fields counted at their length (at least what they decode to)."""
+        return self.receive_buffer - len(self.readable) - self.pending_chars - self.buffered_bytes
+
+    def _fits(self, n: int) -> bool:
+        """``n <= free()``, decoding the deferred fields only when the bound
+        does not settle it."""
+        return n <= self._free_at_least() or n <= self.free()
 
     def window_to_advertise(self) -> int:
         """Packets the peer may send beyond ``expected``: room for full packets, capped."""
         if self.discard:
             return self.window
-        return min(self.window, self.free() // max(self.capacity, 1))
+        capacity = max(self.capacity, 1)
+        if self.pending and self._free_at_least() >= self.window * capacity:
+            return self.window  # free() is at least the bound: the cap applies
+        return min(self.window, self.free() // capacity)
 
     def read(self, max_bytes: int | None) -> bytes:
         """Take up to ``max_bytes`` readable bytes (all of them when None)."""
+        if self.pending:
+            self.flush()
         n = len(self.readable) if max_bytes is None else min(max_bytes, len(self.readable))
         out = bytes(self.readable[:n])
         del self.readable[:n]

@@ -161,7 +161,7 @@ class Sender:
 
     def add(self, wire: bytes, payload: int, eof: bool) -> Outstanding:
         """Register a new packet with the next sequence number."""
-        pkt = Outstanding(seq=self.next, wire=wire, payload=payload, eof=eof)
+        pkt = Outstanding(self.next, wire, payload, eof)  # (positional: once per packet)
         self.outstanding[self.next] = pkt
         self.next += 1
         self._unacked += 1

@@ -1,5 +1,6 @@
 """``linksim bench pty``: SerialSocket goodput over a raw pty pair, no impairments
-(``--port socket``: over pyserial's ``socket://``; ``--port loop``: raw ``loop://`` I/O).
+(``--port socket``: over pyserial's ``socket://``; ``--port loop``: raw ``loop://`` I/O;
+``--port memory``: the two endpoints alone, no port).
 
 Two serial sockets talk over the master and slave side of one pty
 (``serialsocket.open_pty_pair``), in one process and one trio run on the wall
@@ -8,6 +9,11 @@ reads them all on the other side (checked byte for byte), and closes.  The
 time is from the first ``send_all`` to the last byte read; the report gives
 the median of ``--runs`` runs for each packet length (MB/s = 10^6 bytes per
 second of application data).  This is a benchmark, not a test.
+
+``--port memory`` hands each endpoint's output straight to the other
+(sans-I/O, no trio, no port) and times the transfer in process CPU time:
+what the ARQ and the codec cost, both sides together, apart from the I/O
+and the machine's other load.
 
 ``--profile FILE`` runs one extra transfer per packet length under cProfile
 and writes the statistics (``python -m pstats FILE``).
@@ -24,7 +30,17 @@ from contextlib import asynccontextmanager
 
 import trio
 
-from serialsocket import EndpointConfig, SerialSocket, accept, connect, open_port, open_pty_pair
+from serialsocket import (
+    ConnectionRequested,
+    Endpoint,
+    EndpointConfig,
+    SerialSocket,
+    State,
+    accept,
+    connect,
+    open_port,
+    open_pty_pair,
+)
 from serialsocket.packets import PRINTABLE, Encoding
 
 __all__ = ["DEFAULT_LENGTHS", "PORTS", "measure", "run_bench_pty"]
@@ -37,11 +53,15 @@ _LIMIT = 300.0
 """Hang guard per transfer (s): 1 MB at a pathological 10 KB/s still fits."""
 
 
-PORTS = ("pty", "socket", "loop")
+PORTS = ("pty", "socket", "loop", "memory")
 """What ``--port`` measures: the two sides of a raw pty pair; pyserial's
 ``socket://`` backend (the client's port) to a loopback TCP socket; pyserial's
 ``loop://``, one port that echoes itself, so only raw port I/O (no ARQ: two
-endpoints cannot share one port)."""
+endpoints cannot share one port); two endpoints with no port between them
+(the ARQ's CPU time alone)."""
+
+_HANDSHAKE_STEPS = 20
+"""Exchanges allowed for the in-memory handshake (it takes two)."""
 
 
 @asynccontextmanager
@@ -114,6 +134,50 @@ async def _transfer(data: bytes, config: EndpointConfig, kind: str = "pty") -> f
     return elapsed
 
 
+def _in_memory(data: bytes, config: EndpointConfig) -> float:
+    """Process CPU seconds to move ``data`` from one endpoint to another, each
+    one's output handed to the other at once (no port, no trio): the client
+    sends, the server reads everything, both run their timers."""
+    clock = time.perf_counter
+    client, server = Endpoint(config), Endpoint(config)
+    server.listen()
+    client.connect(clock())
+    for _ in range(_HANDSHAKE_STEPS):
+        if wire := client.data_to_send(clock()):
+            server.receive_data(wire, clock())
+        if any(isinstance(ev, ConnectionRequested) for ev in server.events()):
+            server.accept(clock())
+        if wire := server.data_to_send(clock()):
+            client.receive_data(wire, clock())
+        client.events()
+        if client.state is State.ESTABLISHED and server.state is State.ESTABLISHED:
+            break
+    else:
+        raise AssertionError("the in-memory handshake did not complete")
+    view = memoryview(data)
+    received = bytearray()
+    at = 0
+    t0 = time.process_time()
+    while len(received) < len(data):
+        now = clock()
+        if at < len(data):
+            at += client.send(view[at:], now)
+        if wire := client.data_to_send(now):
+            server.receive_data(wire, clock())
+        if wire := server.data_to_send(clock()):
+            client.receive_data(wire, clock())
+        received += server.read(None, clock())
+        now = clock()
+        for ep in (client, server):
+            deadline = ep.get_timer()
+            if deadline is not None and deadline <= now:
+                ep.handle_timer(now)
+    elapsed = time.process_time() - t0
+    if bytes(received) != data:
+        raise AssertionError("the endpoints corrupted data in memory")
+    return elapsed
+
+
 def measure(
     size: int,
     runs: int,
@@ -132,12 +196,15 @@ def measure(
     )
     if port == "loop":
         times = [trio.run(_echo, data) for _ in range(runs)]
+    elif port == "memory":
+        times = [_in_memory(data, config) for _ in range(runs)]
     else:
         times = [trio.run(_transfer, data, config, port) for _ in range(runs)]
     median = statistics.median(times)
     return {
         "port": port,
         "arq": port != "loop",
+        "clock": "process" if port == "memory" else "wall",
         "encoding": "printable" if encoding.printable else "8bit",
         "max_packet_length": max_len,
         "window": window,

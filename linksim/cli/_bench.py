@@ -512,7 +512,8 @@ def add_pty_arguments(ap: argparse.ArgumentParser) -> None:
         action="append",
         dest="ports",
         help="pty (default): a raw pty pair; socket: pyserial's socket:// to loopback TCP; "
-        "loop: pyserial's loop:// echo, raw port I/O without the ARQ (repeatable)",
+        "loop: pyserial's loop:// echo, raw port I/O without the ARQ; memory: the two "
+        "endpoints with no port, in process CPU time (repeatable)",
     )
     ap.add_argument("--profile", metavar="FILE", help="also write a cProfile of one run per length")
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
@@ -541,6 +542,13 @@ def pty_main(args: argparse.Namespace) -> int:
         if not r["arq"]:
             print(
                 f"pyserial loop:// raw port I/O (write, read back; no ARQ): {r['MBps']} MB/s"
+                f" (median of {r['runs']} x {r['bytes']} bytes)"
+            )
+            continue
+        if r["port"] == "memory":
+            print(
+                f"Two endpoints in memory (no port), {r['max_packet_length']}-character packets,"
+                f" window {r['window']}: {r['MBps']} MB/s of process CPU time"
                 f" (median of {r['runs']} x {r['bytes']} bytes)"
             )
             continue

@@ -82,6 +82,25 @@ def test_bench_pty_over_socket_and_loop_urls(capsys: pytest.CaptureFixture[str])
     assert all(r["MBps"] > 0 for r in rows)
 
 
+def test_bench_pty_in_memory(capsys: pytest.CaptureFixture[str]) -> None:
+    """--port memory: the two endpoints with no port, timed in CPU time."""
+    ap = argparse.ArgumentParser()
+    bench_cli.add_pty_arguments(ap)
+    args = ap.parse_args(["--size", "5000", "--runs", "1", "--port", "memory", "--max-len", "128"])
+    assert bench_cli.pty_main(args) == 0
+    assert "Two endpoints in memory (no port), 128-character packets" in capsys.readouterr().out
+    record = run_bench_pty(size=5000, runs=1, lengths=(128,), ports=("memory",))
+    assert isinstance(record["results"], list)
+    [row] = record["results"]
+    assert (row["port"], row["arq"], row["clock"], row["bytes"]) == (
+        "memory",
+        True,
+        "process",
+        5000,
+    )
+    assert row["MBps"] > 0
+
+
 def test_bench_pty_eight_bit_profile() -> None:
     # Both sockets take the profile; the record names it (the 4096 run is
     # the same code at another length, so one length keeps this fast).
