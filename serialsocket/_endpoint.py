@@ -1580,7 +1580,7 @@ class Endpoint:
         r = self._receiver
         taken = r.delivered_total - len(r.readable) + r.buffered_bytes
         span = now - self._tune_at
-        if span >= srtt / TUNE_EARLY and self._tune_at > -math.inf:
+        if span > 0 and span >= srtt / TUNE_EARLY and self._tune_at > -math.inf:
             # From a quarter of a round trip on, at the rate it arrives: the
             # first full flight of a sender that just measured the line is
             # a round trip of line, and waiting for the round trip to end

@@ -34,6 +34,12 @@ PINNED: list[tuple[str, bytes]] = [
     # Found by fuzz_parser (2026-11-29), fixed in encode_prefix: a run cut at the
     # end of its slice (capacity 6, two fields).
     ("fuzz_parser", b"\x00\x01\x00abcd\x00\x00\x00\x00\x00"),
+    # Found by fuzz_arq_receive (2026-11-29), fixed in Endpoint._autotune: a round
+    # trip measured as 0 and two data packets at one instant divided by zero.
+    (
+        "fuzz_arq_receive",
+        bytes.fromhex("1e05008000" "1e05008000" "00000002616201" "00000102636401"),
+    ),
 ]
 
 
