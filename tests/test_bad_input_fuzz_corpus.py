@@ -38,7 +38,7 @@ PINNED: list[tuple[str, bytes]] = [
     # trip measured as 0 and two data packets at one instant divided by zero.
     (
         "fuzz_arq_receive",
-        bytes.fromhex("1e05008000" "1e05008000" "00000002616201" "00000102636401"),
+        bytes.fromhex("1e050080001e050080000000000261620100000102636401"),
     ),
 ]
 
