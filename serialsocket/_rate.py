@@ -518,7 +518,8 @@ class RateEstimator:
         """
         if spacing <= 0 or self._reverse_at > sent_at:
             return None
-        line = wire_bytes / spacing
+        # Never below what the ACK clock has already seen the line deliver.
+        line = max(wire_bytes / spacing, self.measured or 0.0)
         if self.rate is None:
             # No rate known and two packets went at once: the first measure
             # of the line, a round trip after the first burst (a busy run

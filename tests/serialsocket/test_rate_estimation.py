@@ -166,6 +166,14 @@ def test_a_rate_pair_raises_a_low_rate_and_settles_a_right_one() -> None:
     unknown.start(0.0, 40.0)
     assert unknown.on_pair(129, 0.5375, 1.0, 42.0) is True
     assert unknown.rate == pytest.approx(240.0)
+    # ... but never below what the ACK clock already saw the line deliver (a
+    # pair whose second ACK waited at the far end would pace the line slower
+    # than it has been running).
+    waited = RateEstimator(None)
+    waited.start(0.0, 2.6)
+    waited.measured = 700.0
+    assert waited.on_pair(129, 0.5, 1.0, 4.0) is True
+    assert waited.rate == 700.0
 
 
 def test_without_hints_a_300_second_line_is_measured_one_round_trip_after_the_first_burst() -> None:
