@@ -195,6 +195,23 @@ def test_without_hints_a_300_second_line_is_measured_one_round_trip_after_the_fi
     assert a.statistics().line_rate == pytest.approx(RATE, rel=0.05)
 
 
+def test_the_queue_end_is_judged_at_no_less_than_the_line_delivered() -> None:
+    # A busy run measured a 9600 bit/s line at 312 characters a second while
+    # 12 KB were queued: judged at that, the queue ended 38 s out, the pacer
+    # held NAKed resends behind it for 20 s, and the netcat's close gave up
+    # (exit 1, row 5 of issue 21's table).  The ACK clock had already seen
+    # 960 a second delivered: the queue drains at least that fast.
+    est = RateEstimator(None)
+    est.start(0.0, 2.6)
+    est.hand(12_000)
+    mark = est.mark(1.0)
+    assert mark is not None
+    est.hand(12_000)
+    est.rate, est.measured = 312.0, 960.0
+    free_at = est.line_free_at(20.0, mark)
+    assert free_at == pytest.approx(20.0 - 2.6 + 12_000 / 960.0)
+
+
 def test_a_busy_run_measures_the_line_exactly() -> None:
     est = RateEstimator(None)
     est.start(0.0, 2.0)
