@@ -171,8 +171,21 @@ PAIR_QUEUED = 1.5
 its handing went behind another: with that one, handed at the same instant,
 a rate pair (:meth:`Endpoint._pair_verdict`)."""
 
+FIRST_FLIGHT_RATE = 960.0
+"""Characters a second (9600 bit/s) the first flight assumes at most, with no
+rate yet: it covers the init exchange's round trip at that rate, about when
+the rate pair's verdict comes back (see _compute_effective_window)."""
+
+FIRST_FLIGHT_MIN = 4
+"""Packets the first flight takes at least: the rate pair and two behind it."""
+
 FINAL_ACK_COPIES = 2
 """Extra copies of the last ACK when a close completes (both EOFs done)."""
+
+DATA_GAP_SILENCE = 4
+"""``dead_after`` is at least this many of the recent largest gaps between the
+peer's data packets: the next may be twice as long (the measured length at
+most doubles a step) and one may be lost."""
 
 OUTAGE_ROUND_TRIPS = 2
 """Once the round trip is measured, ``dead_after`` rides out an outage of this
@@ -313,12 +326,16 @@ class Endpoint:
     _clock: float
     _last_heard: float
     _last_probe: float
+    _last_data_at: float | None
+    _data_gap: float
     _init_deadline: float
     _connect_deadline: float
     _linger_until: float
     _dead_after: float
     _close_deadline: float
     _close_patience: float
+    _close_patience_given: float | None
+    _close_progress_at: float
     _close_mark: tuple[int, int]
     _peer_data_seen: bool
     _abort_reason: str | None
@@ -330,7 +347,7 @@ class Endpoint:
     _answers: int
     _answer_span: float
     """Seconds from our first answer to the latest copy of the init heard after it."""
-    _window_key: tuple[int, float | None, int, float | None] | None
+    _window_key: tuple[int, float | None, int, float | None, int] | None
     _backlog_at: float
     _window_cached: int
     _long_seq: bool
@@ -499,12 +516,18 @@ class Endpoint:
         ``patience`` seconds (default ``dead_after``) in which nothing moved:
         no packet of ours newly acknowledged and nothing new in order from the
         peer.  Each such step re-arms the deadline (see :meth:`get_timer`).
-        A silent link is judged dead after ``dead_after`` as always."""
+        The default follows ``dead_after`` as the round trip is measured
+        during the close: a close begun at the first answer, before the queue
+        in front of the line showed in any round trip, must not keep that
+        answer's few seconds.  A silent link is judged dead after
+        ``dead_after`` as always."""
         if self._state not in WRITABLE:
             return
         if self._state is State.ESTABLISHED and self._close_deadline == math.inf:
+            self._close_patience_given = patience
             self._close_patience = self._dead_after if patience is None else patience
             self._close_mark = self._progress_mark()
+            self._close_progress_at = now
             self._close_deadline = now + self._close_patience
         self._sender.eof_requested = True
         self._receiver.discard = True
@@ -978,6 +1001,8 @@ class Endpoint:
         self._pacer.probe = self._pair_due()
         self._last_heard = 0.0
         self._last_probe = -math.inf
+        self._last_data_at = None
+        self._data_gap = 0.0
         self._init_deadline = math.inf
         self._connect_deadline = math.inf
         self._linger_until = math.inf
@@ -986,6 +1011,8 @@ class Endpoint:
         self._rtt.ceiling = self._ceiling()
         self._close_deadline = math.inf
         self._close_patience = self._dead_after
+        self._close_patience_given = None
+        self._close_progress_at = 0.0
         self._close_mark = (0, 0)
         self._peer_data_seen = False
         self._abort_reason = None
@@ -1292,7 +1319,13 @@ class Endpoint:
             # hashes the enum member in Python.)
             connected = self._state is _ESTABLISHED or self._state in CONNECTED
             if connected and (split := self._split_seq(packet)) is not None:
-                self._rate.reverse(now)
+                if split[1]:
+                    # Data spaces the ACKs behind it by the peer's line.  An
+                    # empty EOF is no longer than an ACK: a netcat listener
+                    # with nothing to send resends its EOF while the ACK
+                    # waits behind our queue, and counting each copy voided
+                    # every rate sample (no hints: never measured).
+                    self._rate.reverse(now)
                 self._on_data(split[0], split[1], ptype == _T_EOF, now)
         elif ptype == _T_ACK:
             if len(packet.data) >= _INIT_MIN_FIELD:
@@ -1465,11 +1498,24 @@ class Endpoint:
         acked = self._pair_lead_acked
         if acked is None:
             return  # the lead was lost or acknowledged with this one: no verdict
+        first = self._rate.rate is None
         verdict = self._rate.on_pair(len(pkt.wire), now - acked, pkt.mark.sent_at, now)
         if verdict is None:
             return
         if verdict:
             self._rate_changed()
+            if first:
+                # The first window went out unpaced: what followed the pair
+                # is still queued, and its timers ran from its handing under
+                # the restart-on-progress rule that holds only without a rate
+                # (31 packets at 128 characters are 16 s of a 2400 bit/s line
+                # with no delay: one timed out half a second after the pair,
+                # and its resend and a "loss" cut the packet length to 96).
+                # Their timers only: their round trips still count from the
+                # handing, so the queue shows and the pacer waits it out (a
+                # pair 5 % low, moving their departures, made round trips
+                # negative).
+                self._rearm_queued(now, pkt.mark, departures=False)
         else:
             # The line is no faster: no more pairs, unless the rate drops far
             # (a timeout undid a raise to what the line delivered).
@@ -1495,9 +1541,10 @@ class Endpoint:
         lead, second = self._pair
         return second.acked or second.transmissions > 1 or lead.transmissions > 1
 
-    def _rearm_queued(self, now: float, mark: RateMark) -> None:
+    def _rearm_queued(self, now: float, mark: RateMark, *, departures: bool = True) -> None:
         """The line is slower than the model that timed the packets in flight:
-        move each one's departure, and its timer, to when it will really leave.
+        move each one's departure, and its timer, to when it will really leave
+        (with ``departures`` False, only its timer).
 
         The packet with ``mark`` left one base round trip before ``now``;
         every packet handed after it leaves when the bytes in between have
@@ -1516,8 +1563,10 @@ class Endpoint:
                 continue
             leaves = left + (pkt.mark.handed_end - mark.handed_end) / rate
             if leaves > pkt.done_at:
-                pkt.done_at = leaves
-                self._sender.arm(pkt, leaves + timeout)
+                if departures:
+                    pkt.done_at = leaves
+                if departures or pkt.deadline < leaves + timeout:
+                    self._sender.arm(pkt, leaves + timeout)
 
     def _bits(self, chars_per_second: float | None) -> float | None:
         """Characters per second as the line's bits per second."""
@@ -1595,6 +1644,16 @@ class Endpoint:
 
     def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
         self._peer_data_seen = True
+        if self._last_data_at is not None:
+            # The peer's data packets' spacing, the largest recent one
+            # (decayed per packet like the peer's length): see _next_probe_time.
+            gap = now - self._last_data_at
+            before = self._data_gap
+            self._data_gap = max(gap, self._data_gap * PEER_LENGTH_DECAY)
+            if self._data_gap > before and DATA_GAP_SILENCE * self._data_gap > self._dead_after:
+                self._dead_after = self._liveness()
+                self._rtt.ceiling = self._ceiling()
+        self._last_data_at = now
         # MARK, LEN, SEQ, TYPE, the long header's three and a CRC-16: the
         # peer's packet about as long as it was on the line.
         wire = max(len(data) + 10, int(self._peer_length * PEER_LENGTH_DECAY), LADDER[0])
@@ -1700,6 +1759,7 @@ class Endpoint:
         mark = self._progress_mark()
         if mark != self._close_mark:
             self._close_mark = mark
+            self._close_progress_at = now
             self._close_deadline = now + self._close_patience
 
     def _check_closed(self, now: float) -> None:
@@ -2089,7 +2149,11 @@ class Endpoint:
             # span, one damaged copy ended it 6 s before the next.
             unmeasured = UNMEASURED_DEAD_AFTER + 4 * self._answer_span
             return base if cfg.dead_after is not None else max(base, unmeasured)
-        return max(base, OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout())
+        # A receiver's own round trip (its EOF answered at once) says nothing
+        # of how far apart the peer's packets come: one with nothing to send
+        # judged the link dead 2.2 s into a 768-character packet at 2400 bit/s.
+        measured = OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout()
+        return max(base, measured, DATA_GAP_SILENCE * self._data_gap)
 
     def _ceiling(self) -> float:
         """The most retransmission backoff may reach: a minute (or 8 initial
@@ -2107,8 +2171,13 @@ class Endpoint:
         follow the path, not the hints."""
         self._dead_after = self._liveness()
         self._rtt.ceiling = self._ceiling()
-        if self._negotiated is not None:
-            self._size_receive_buffer()
+        if self._close_deadline != math.inf and self._close_patience_given is None:
+            # A close's default patience is dead_after as measured now (see
+            # close): 31 packets queued in a pty at 2400 bit/s drain for 16 s,
+            # and a close that kept the 2.6 s of its first answer gave up on a
+            # transfer that was moving.
+            self._close_patience = self._dead_after
+            self._close_deadline = self._close_progress_at + self._close_patience
 
     def _size_receive_buffer(self) -> None:
         """Grow the receive buffer to :data:`BUFFER_ROUND_TRIPS` of the line's
@@ -2230,7 +2299,9 @@ class Endpoint:
         return 2 * self._one_way() + self._tx(nak) - 2 * cr - TIME_EPSILON
 
     def _effective_window(self) -> int:
-        key = (self._sender.window, self._rtt.srtt, self._window_wire(), self._rate.measured)
+        # (Without a rate the first flight grows with every ACK: see below.)
+        acked = self._sender.packets_acked if self._rate.rate is None else -1
+        key = (self._sender.window, self._rtt.srtt, self._window_wire(), self._rate.measured, acked)
         if key != self._window_key:
             self._window_key = key
             self._window_cached = self._compute_effective_window()
@@ -2256,11 +2327,27 @@ class Endpoint:
             # until a queue forms and the busy run measures the rate (31
             # packets never fill a 20-minute line, so without this the rate
             # was never measured and 300 s one way ran at 0.02 of the line).
+            # The first flight, before a rate is known, waits in the queue
+            # in front of the line, cut to lengths chosen before any
+            # evidence, until the rate pair (its first two packets) sets the
+            # rate about one init round trip later.  31 packets of 128
+            # characters are 16 s of a 2400 bit/s line: at no delay, 0.89 of
+            # the line at best where 0.93 was wanted.  So only what a 9600
+            # bit/s line would carry in that round trip goes (a slower line
+            # still has a queue until the verdict; a faster one on a short
+            # path idles for that round trip), and one more packet with each
+            # acknowledged, as TCP's slow start grows: pairs give no verdict
+            # while the peer's data comes back, and a window held to the
+            # first flight would never build the queue a busy run measures.
+            first = MAX_WINDOW
+            if (init := self._rate.init_rtt) is not None:
+                flight = math.ceil(init * FIRST_FLIGHT_RATE / wire) + self._sender.packets_acked
+                first = max(FIRST_FLIGHT_MIN, min(MAX_WINDOW, flight))
             measured, srtt = self._rate.measured, self._rtt.srtt
             if not self._long_seq or measured is None or srtt is None:
-                return min(window, MAX_WINDOW)
+                return min(window, first)
             grown = math.ceil(2 * measured * srtt / wire) + 5
-            return max(1, min(window, max(MAX_WINDOW, grown)))
+            return max(1, min(window, max(first, grown)))
         rtt = max(self._rtt.srtt if self._rtt.srtt is not None else 0.0, self._min_rtt())
         # The window must outlast the repair of a loss, or the line idles.
         # Packet k (first sent from T - tx to T) is lost; the next packet's
@@ -2284,8 +2371,12 @@ class Endpoint:
         return max(1, min(window, bdp))
 
     def _next_probe_time(self) -> float:
-        """Probe when the peer has been quiet for a quarter of ``dead_after``."""
-        interval = self._dead_after / 4
+        """Probe when the peer has been quiet for a quarter of ``dead_after``,
+        and for twice the recent gap between its data packets: a receiver
+        whose own round trip is short (its EOF answered at once) polled
+        between every two of a netcat's 512-character packets at 2400 bit/s,
+        and each answer took 15 characters of the busy line (3 % of it)."""
+        interval = max(self._dead_after / 4, 2 * self._data_gap)
         if self._sender.in_flight():
             return math.inf  # Retransmissions already probe.
         return max(self._last_heard, self._last_probe) + interval

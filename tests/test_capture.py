@@ -32,7 +32,14 @@ from serialsocket.capture import (
     PcapngWriter,
     read_pcapng,
 )
-from serialsocket.packets import BlockCheck, InitParameters, Packet, PacketParser, PacketReceived
+from serialsocket.packets import (
+    MAX_PACKET_LENGTH,
+    BlockCheck,
+    InitParameters,
+    Packet,
+    PacketParser,
+    PacketReceived,
+)
 
 EPOCH = 1_764_000_000.0
 """A fixed wall-clock origin for the virtual-clock captures (2025-11-24 16:00 UTC)."""
@@ -216,8 +223,12 @@ def arq_capture(path: pathlib.Path) -> bytes:
 
 
 def _packets(packets: tuple[CapturedPacket, ...], direction: Direction) -> list[Packet]:
-    """The Kermit packets carried one way (every one must check good)."""
-    parser = PacketParser(check=BlockCheck.CRC16, init_check=BlockCheck.CRC16)
+    """The Kermit packets carried one way (every one must check good), of any
+    length the protocol allows: on a clean line the measured length grows
+    past the parser's default."""
+    parser = PacketParser(
+        max_length=MAX_PACKET_LENGTH, check=BlockCheck.CRC16, init_check=BlockCheck.CRC16
+    )
     parser.receive_data(b"".join(p.data for p in packets if p.direction == direction))
     found = []
     while (event := parser.next_event()) is not None:

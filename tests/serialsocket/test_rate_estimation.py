@@ -15,7 +15,7 @@ import random
 import pytest
 
 from linksim.bench._transfer import Measurement, simulate
-from serialsocket import Endpoint, EndpointConfig
+from serialsocket import Endpoint, EndpointConfig, State
 from serialsocket._rate import RateEstimator
 from serialsocket.packets import PRINTABLE
 
@@ -68,6 +68,24 @@ def test_the_right_hint_and_the_wrong_ones_reach_the_same_speed() -> None:
         # wrong hints >= 0.8.  No storm: a handful of timeouts at most.
         assert goodput >= 0.9 * exact, (hints, goodput, exact)
         assert timeouts <= exact_timeouts + 30, (hints, timeouts)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_without_hints_a_resent_inits_bound_never_ratchets_the_round_trip_down(seed: int) -> None:
+    # No hints at 1.3 s one way: the first init's 1 s timer runs out before
+    # its answer, so the answer bounds the round trip only from above and is
+    # never trusted as fast_evidence's reference.  Model-timed samples still
+    # tightened that bound, each passing as plausible against half of it: a
+    # pacer model running late made them short, and the bound ratcheted down
+    # (0.004 s on a 2.6 s path after 1250 s), the smoothed round trip and the
+    # window with it.  The hints sweep's point ran at 0.87 of the limit with
+    # one seed and 0.66 with another, 0.98 with exact hints.
+    payload = random.Random(seed).randbytes(207_429)
+    exact = _simulate("exact", payload=payload, seed=seed)
+    none = _simulate("none", payload=payload, seed=seed)
+    assert none.end == "complete"
+    assert none.ok
+    assert none.seconds <= exact.seconds / 0.9, (none.seconds, exact.seconds)
 
 
 def _endpoints(line_rate: float | None) -> tuple[Endpoint, Endpoint, SimLink]:
@@ -193,6 +211,90 @@ def test_without_hints_a_300_second_line_is_measured_one_round_trip_after_the_fi
     link.run_until(lambda: a.statistics().line_rate is not None or link.now > start + 1300)
     assert link.now < start + 600 + 10  # one round trip and the pair's line time
     assert a.statistics().line_rate == pytest.approx(RATE, rel=0.05)
+
+
+@pytest.mark.parametrize("delay", [0.0, 1.3])
+def test_a_peer_that_sent_only_its_eof_does_not_hide_the_line(delay: float) -> None:
+    # The netcat's listener with nothing on stdin sends its EOF at once, and
+    # resends it while its ACK waits behind our queue.  Each copy counted as
+    # the peer's data on the way back: every rate sample and pair was void,
+    # and with no hints the connector never measured the line (the window's
+    # 31 packets queued in the pty, packets cut long before their evidence).
+    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=delay, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    b.send_eof(link.now)
+    start = link.now
+    a.send(random.Random(9).randbytes(8000), link.now)
+    link.run_until(lambda: a.statistics().line_rate is not None or link.now > start + 30)
+    assert a.statistics().line_rate == pytest.approx(RATE, rel=0.05)
+    assert link.now < start + 2 * delay + 3.0  # the first pair's ACKs
+
+
+def test_a_close_begun_at_the_first_answer_waits_for_the_queue_the_pair_finds() -> None:
+    # The netcat reads all of stdin and closes at once, no hints, no delay:
+    # the close's patience was dead_after at that moment, 2.6 s from the
+    # init exchange alone.  The first window (16 s of queue) went unpaced;
+    # once the pair set the rate, the pacer rightly held new data until it
+    # drained, the queued packets' timers fired while they waited, and the
+    # close gave up ("close made no progress for 2.6 s") on a moving transfer.
+    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=0.0, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    b.send_eof(link.now)
+    data = random.Random(10).randbytes(8192)
+    sent = a.send(data, link.now)
+    assert sent == len(data)
+    a.close(link.now)
+    got = bytearray()
+
+    def done() -> bool:
+        got.extend(b.read(None, link.now))
+        return a.state in (State.CLOSED, State.LINGER, State.FAILED, State.DEAD)
+
+    link.run_until(done, limit=200.0)
+    got += b.read(None, link.now)
+    assert a.state in (State.CLOSED, State.LINGER), a.state
+    assert bytes(got) == data
+    assert a.statistics().timeouts == 0
+
+
+def test_a_receiver_with_nothing_to_send_neither_polls_nor_dies_between_long_packets() -> None:
+    # The netcat's listener: nothing on stdin, its EOF answered at once, so
+    # its own round trip is short.  It polled after a quarter of its
+    # dead_after, between every two long packets of a 2400 bit/s line (each
+    # answer 15 characters of that line), and without the polls it judged the
+    # link dead 2.2 s into a 768-character packet.  (Before the rate pair
+    # could see through its EOF this was a timeout storm: 865 timeouts.)
+    a = Endpoint(EndpointConfig(one_way_delay=0.0, line_rate=None, max_packet_time=None))
+    b = Endpoint(EndpointConfig(one_way_delay=0.0, line_rate=None))
+    link = SimLink(a, b, delay=0.0, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    b.send_eof(link.now)
+    link.run_for(2.0)
+    polls = []
+    queue_ack = b._queue_ack
+
+    def counting(seq_mod: int, *, poll: bool = False) -> None:
+        if poll and b.statistics().bytes_delivered:  # (idle before the data: polls due)
+            polls.append(link.now)
+        queue_ack(seq_mod, poll=poll)
+
+    b._queue_ack = counting  # type: ignore[method-assign]
+    data = random.Random(11).randbytes(16_000)
+    assert _transfer(a, b, link, data) == data
+    assert b.state is State.ESTABLISHED
+    assert a.statistics().packet_length > 512  # the long packets were cut
+    assert polls == []
+    assert a.statistics().timeouts == 0
 
 
 def test_the_queue_end_is_judged_at_no_less_than_the_line_delivered() -> None:
