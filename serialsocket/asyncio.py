@@ -549,9 +549,11 @@ class AsyncioSerialSocket:
         """Before the endpoint's close: get what ``write`` buffered into the endpoint,
         giving up (abort) after ``close_timeout`` without progress."""
         d = self._d
-        # None: the endpoint's dead-link interval, which follows the measured round trip.
-        patience = d.ep.dead_after if self.close_timeout is None else self.close_timeout
         while d.outbox and d.ep.state is State.ESTABLISHED and d.broken is None:
+            # None: the endpoint's dead-link interval, which follows the
+            # measured round trip -- read at every step, not once: a close
+            # begun at the first answer knows only the init's round trip.
+            patience = d.ep.dead_after if self.close_timeout is None else self.close_timeout
             before = len(d.outbox)
             try:
                 async with asyncio.timeout(patience):
