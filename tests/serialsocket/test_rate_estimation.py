@@ -98,6 +98,20 @@ def _endpoints(line_rate: float | None) -> tuple[Endpoint, Endpoint, SimLink]:
     return a, b, link
 
 
+def _unhinted(
+    delay: float, sender: EndpointConfig | None = None
+) -> tuple[Endpoint, Endpoint, SimLink]:
+    """a (``sender``, else told nothing) connected to b (told nothing) over a
+    line of ``delay`` seconds one way at RATE."""
+    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
+    a, b = Endpoint(sender or cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=delay, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    return a, b, link
+
+
 def _transfer(a: Endpoint, b: Endpoint, link: SimLink, data: bytes) -> bytes:
     """Send ``data`` from a to b over ``link``, stepping until b has read it all."""
     sent = 0
@@ -200,12 +214,7 @@ def test_without_hints_a_300_second_line_is_measured_one_round_trip_after_the_fi
     # the rate stayed unknown and the window grew only from what the line
     # delivered.  The first two packets are a rate pair: their ACKs, one
     # transmit time apart, measure the line a round trip after they left.
-    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
-    a, b = Endpoint(cfg), Endpoint(cfg)
-    link = SimLink(a, b, delay=300.0, rate=RATE)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    a, _b, link = _unhinted(300.0)
     start = link.now
     a.send(random.Random(8).randbytes(8000), link.now)
     link.run_until(lambda: a.statistics().line_rate is not None or link.now > start + 1300)
@@ -220,12 +229,7 @@ def test_a_peer_that_sent_only_its_eof_does_not_hide_the_line(delay: float) -> N
     # the peer's data on the way back: every rate sample and pair was void,
     # and with no hints the connector never measured the line (the window's
     # 31 packets queued in the pty, packets cut long before their evidence).
-    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
-    a, b = Endpoint(cfg), Endpoint(cfg)
-    link = SimLink(a, b, delay=delay, rate=RATE)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    a, b, link = _unhinted(delay)
     b.send_eof(link.now)
     start = link.now
     a.send(random.Random(9).randbytes(8000), link.now)
@@ -241,12 +245,7 @@ def test_a_close_begun_at_the_first_answer_waits_for_the_queue_the_pair_finds() 
     # once the pair set the rate, the pacer rightly held new data until it
     # drained, the queued packets' timers fired while they waited, and the
     # close gave up ("close made no progress for 2.6 s") on a moving transfer.
-    cfg = EndpointConfig(one_way_delay=0.0, line_rate=None)
-    a, b = Endpoint(cfg), Endpoint(cfg)
-    link = SimLink(a, b, delay=0.0, rate=RATE)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    a, b, link = _unhinted(0.0)
     b.send_eof(link.now)
     data = random.Random(10).randbytes(8192)
     sent = a.send(data, link.now)
@@ -272,12 +271,7 @@ def test_a_receiver_with_nothing_to_send_neither_polls_nor_dies_between_long_pac
     # answer 15 characters of that line), and without the polls it judged the
     # link dead 2.2 s into a 768-character packet.  (Before the rate pair
     # could see through its EOF this was a timeout storm: 865 timeouts.)
-    a = Endpoint(EndpointConfig(one_way_delay=0.0, line_rate=None, max_packet_time=None))
-    b = Endpoint(EndpointConfig(one_way_delay=0.0, line_rate=None))
-    link = SimLink(a, b, delay=0.0, rate=RATE)
-    b.listen()
-    a.connect(0.0)
-    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    a, b, link = _unhinted(0.0, EndpointConfig(line_rate=None, max_packet_time=None))
     b.send_eof(link.now)
     link.run_for(2.0)
     polls = []
