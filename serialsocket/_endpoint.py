@@ -2171,6 +2171,8 @@ class Endpoint:
         follow the path, not the hints."""
         self._dead_after = self._liveness()
         self._rtt.ceiling = self._ceiling()
+        if self._negotiated is not None:
+            self._size_receive_buffer()
         if self._close_deadline != math.inf and self._close_patience_given is None:
             # A close's default patience is dead_after as measured now (see
             # close): 31 packets queued in a pty at 2400 bit/s drain for 16 s,

@@ -16,6 +16,7 @@ import pytest
 
 from linksim.bench._transfer import Measurement, simulate
 from serialsocket import Endpoint, EndpointConfig, State
+from serialsocket._endpoint import BUFFER_ROUND_TRIPS
 from serialsocket._rate import RateEstimator
 from serialsocket.packets import PRINTABLE
 
@@ -289,6 +290,27 @@ def test_a_receiver_with_nothing_to_send_neither_polls_nor_dies_between_long_pac
     assert a.statistics().packet_length > 512  # the long packets were cut
     assert polls == []
     assert a.statistics().timeouts == 0
+
+
+def test_a_measured_round_trip_sizes_the_receive_buffer() -> None:
+    # Both ends told the rate and a delay ten times short, on a 30 s line:
+    # the listener's buffer must grow to BUFFER_ROUND_TRIPS round trips of
+    # the line once the round trip is measured (the connector's first data
+    # after the answer seeds it), not stay at the 64 KiB the hints gave (a
+    # change to the close's patience once dropped this step, and no other
+    # test noticed).
+    cfg = EndpointConfig(one_way_delay=3.0, line_rate=RATE)
+    a, b = Endpoint(cfg), Endpoint(cfg)
+    link = SimLink(a, b, delay=30.0, rate=RATE)
+    b.listen()
+    a.connect(0.0)
+    link.run_until(lambda: a.parameters is not None and b.parameters is not None)
+    a.send(b"x" * 200, link.now)
+    link.run_until(lambda: b.readable >= 200)
+    srtt = b.statistics().smoothed_rtt
+    assert srtt is not None
+    assert srtt >= 60.0
+    assert b.statistics().receive_buffer >= BUFFER_ROUND_TRIPS * RATE / 10 * 60.0
 
 
 def test_the_queue_end_is_judged_at_no_less_than_the_line_delivered() -> None:
