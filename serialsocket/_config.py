@@ -269,7 +269,8 @@ class EndpointConfig:
             timeout, at least 2 s.  It is a floor: once a round trip is
             measured the endpoint waits at least two measured round trips
             (an outage that long is ridden out) plus two retransmission
-            timeouts, and a derived value is at least 60 s until then, so a
+            timeouts, and four of the recent largest gaps between the peer's
+            data packets; a derived value is at least 60 s until then, so a
             hint that is too small never ends a healthy link.
         max_retries: per-packet retransmissions before aborting; None means
             unlimited (the right choice for long-delay links: liveness is then
