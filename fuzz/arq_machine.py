@@ -29,7 +29,11 @@ Hypothesis then interleaves application calls, time, and impairments:
   head chunk (timers due before that arrival fire first, in order: time never
   runs backwards and no timer is skipped);
 * the line drops a chunk or a slice of one, flips one bit, inserts garbage,
-  duplicates a chunk, splits one into two reads, or delays one.
+  duplicates a chunk, splits one into two reads, or delays one;
+* a side whose port drops unsent bytes (drawn: ``Endpoint.line_discards``)
+  has its line flushed whenever an expedited packet cuts in (PROTOCOL.md
+  11): the chunks not yet begun vanish and the one leaving the UART is cut
+  short, as a ``tcflush`` does, and the endpoint must resend what it cut.
 
 The line never *reorders*: every impairment keeps arrival times
 non-decreasing along the FIFO.  A duplicate is inserted directly after its
@@ -102,6 +106,7 @@ No endpoint call may raise: any exception fails the example.  Time is explicit
 from __future__ import annotations
 
 import itertools
+import math
 import random
 from dataclasses import dataclass, field
 
@@ -242,10 +247,13 @@ def payloads(max_size: int = 600) -> st.SearchStrategy[bytes]:
 
 @dataclass(slots=True)
 class Chunk:
-    """Bytes on the line and the instant they finish arriving at the far end."""
+    """Bytes on the line and the instant they finish arriving at the far end;
+    ``start`` is when they began leaving the sender's UART (-inf for bytes
+    an impairment made: an output flush never drops those)."""
 
     arrival: float
     data: bytes
+    start: float = -math.inf
 
 
 @dataclass(slots=True)
@@ -269,7 +277,35 @@ class Line:
         arrival = self.free_at + self.delay
         if self.chunks:
             arrival = max(arrival, self.chunks[-1].arrival)
-        self.chunks.append(Chunk(arrival, data))
+        self.chunks.append(Chunk(arrival, data, start))
+
+    def discard(self, now: float) -> None:
+        """The sender's port dropped what it had not sent at ``now`` (an
+        output flush, PROTOCOL.md 11): chunks not yet begun go, the one
+        leaving the UART is cut after the character in the shift register
+        (the far end sees a truncated packet)."""
+        if self.rate is None or self.free_at <= now:
+            return
+        char = self.bits / self.rate
+        kept: list[Chunk] = []
+        free_at = now
+        for chunk in self.chunks:
+            if chunk.start == -math.inf or chunk.start + len(chunk.data) * char <= now:
+                kept.append(chunk)  # already left (or made by an impairment)
+            elif chunk.start <= now:
+                sent = min(len(chunk.data), math.floor((now - chunk.start) / char) + 1)
+                cut = chunk.start + sent * char
+                kept.append(
+                    Chunk(
+                        chunk.arrival - (len(chunk.data) - sent) * char,
+                        chunk.data[:sent],
+                        chunk.start,
+                    )
+                )
+                free_at = max(free_at, cut)
+        self.chunks = kept
+        self.restore_order(0)
+        self.free_at = free_at
 
     def restore_order(self, start: int) -> None:
         """Push later arrivals back so none overtakes chunk ``start``."""
@@ -396,7 +432,10 @@ class ARQMachine(RuleBasedStateMachine):
         and collect its events."""
         for side in SIDES:
             ep = self.ep[side]
-            for packet in split_packets(ep.data_to_send(self.now)):
+            data = ep.data_to_send(self.now)
+            if ep.take_discard():
+                self.lines[self._out_line(side)].discard(self.now)
+            for packet in split_packets(data):
                 self.lines[self._out_line(side)].transmit(self.now, packet)
             self.events[side].extend(ep.events())
 
@@ -499,7 +538,14 @@ class ARQMachine(RuleBasedStateMachine):
             )
             for side in SIDES
         }
-        self.start(configs, one_way_delay=one_way_delay, line_rate=line_rate, early=early)
+        discards = {side: data.draw(st.booleans(), label=f"discards_{side}") for side in SIDES}
+        self.start(
+            configs,
+            one_way_delay=one_way_delay,
+            line_rate=line_rate,
+            early=early,
+            discards=discards,
+        )
 
     def start(
         self,
@@ -508,9 +554,14 @@ class ARQMachine(RuleBasedStateMachine):
         one_way_delay: float,
         line_rate: float | None,
         early: bytes = b"",
+        discards: dict[str, bool] | None = None,
     ) -> None:
-        """B listens; A queues ``early`` (what its send buffer takes) and connects."""
+        """B listens; A queues ``early`` (what its send buffer takes) and connects.
+        ``discards``: which sides' ports drop unsent bytes when an expedited
+        packet cuts in (``Endpoint.line_discards``; the line obliges)."""
         self.ep = {side: Endpoint(configs[side]) for side in SIDES}
+        for side, on in (discards or {}).items():
+            self.ep[side].line_discards = on
         self.lines = {d: Line(delay=one_way_delay, rate=line_rate) for d in DIRECTIONS}
         self.ep["b"].listen()
         a = self.ep["a"]

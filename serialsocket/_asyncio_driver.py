@@ -23,6 +23,7 @@ import asyncio
 import contextlib
 import logging
 import math
+from collections.abc import Callable
 
 from ._asyncio_port import READ_SIZE, AsyncPort
 from ._endpoint import Endpoint
@@ -47,6 +48,13 @@ class AsyncioDriver:
     def __init__(self, port: AsyncPort, endpoint: Endpoint, *, owns_port: bool) -> None:
         self.port = port
         self.ep = endpoint
+        # A port that can drop what it has not sent lets an expedited packet
+        # cut in ahead of it (PROTOCOL.md 11).
+        discard = getattr(port, "discard_output", None)
+        self._discard: Callable[[], object] | None = (
+            discard if callable(discard) and getattr(port, "can_discard_output", False) else None
+        )
+        endpoint.line_discards = self._discard is not None
         self.owns_port = owns_port
         self.generation = 0
         self.outcome = LinkOutcome()
@@ -184,6 +192,8 @@ class AsyncioDriver:
             if data:
                 self._writer_idle = False
                 try:
+                    if self.ep.take_discard() and self._discard is not None:
+                        self._discard()
                     await self.port.write(data)
                 except OSError as exc:
                     cause = LineFailed(f"writing to the line failed: {exc!r}")

@@ -34,6 +34,8 @@ from ._pyserial import (
     THREAD_READ_TIMEOUT,
     PortStatistics,
     check_line_settings,
+    discard_unsent,
+    holds_output,
     open_serial,
     port_encoding,
     read_blocks_for_one_byte,
@@ -74,6 +76,9 @@ class AsyncPort(Protocol):
 
 
 class _Transport(Protocol):
+    can_discard: bool
+
+    def discard_output(self) -> None: ...
     async def read(self, max_bytes: int) -> bytes: ...
     async def write(self, data: bytes) -> None: ...
     async def aclose(self) -> None: ...
@@ -170,6 +175,26 @@ class AsyncioSerialPort:
         self._writes += 1
         self._bytes_out += len(data)
 
+    @property
+    def can_discard_output(self) -> bool:
+        """:meth:`discard_output` drops something: a serial device, not a
+        pty or a URL (see ``SerialPort.can_discard_output``)."""
+        return self._t.can_discard
+
+    def discard_output(self) -> None:
+        """Drop the bytes written and not yet sent (see
+        ``SerialPort.discard_output``); call it between writes.
+
+        Raises:
+            OSError: the device failed, or the port was closed.
+        """
+        self._check_open()
+        try:
+            self._t.discard_output()
+        except OSError:
+            self._errors += 1
+            raise
+
     async def aclose(self) -> None:
         """Close the port (idempotent; a waiting read or write gets ``EBADF``)."""
         if self._closed:
@@ -200,12 +225,18 @@ def _wake(future: asyncio.Future[None]) -> None:
 class _FdTransport:
     """Non-blocking reads and writes on a duplicate of a device's fd, woken by the loop."""
 
-    def __init__(self, fd: int, owner: Any = None) -> None:
+    def __init__(self, fd: int, owner: Any = None, *, can_discard: bool = False) -> None:
         self._fd = os.dup(fd)  # our own number: pyserial closes its fd, we close ours
         os.set_blocking(self._fd, False)
         self._owner = owner
         self._closed = False
         self._waiting: set[asyncio.Future[None]] = set()
+        self.can_discard = can_discard
+
+    def discard_output(self) -> None:
+        self._check()
+        if self.can_discard:
+            discard_unsent(self._fd)
 
     async def _wait(
         self,
@@ -281,6 +312,7 @@ class _ThreadTransport:
     def __init__(self, ser: Any, loop: asyncio.AbstractEventLoop) -> None:
         self._ser = ser
         self._loop = loop
+        self.can_discard = False
         self._stop = threading.Event()
         self._chunks: queue.Queue[bytes | OSError] = queue.Queue(_THREAD_QUEUE)
         self._arrived = asyncio.Event()
@@ -324,6 +356,10 @@ class _ThreadTransport:
                 break
             data += chunk
         return bytes(data)
+
+    def discard_output(self) -> None:
+        # A URL has no UART queue of ours to drop: nothing to do.
+        return
 
     async def read(self, max_bytes: int) -> bytes:
         while not self._pending:
@@ -402,7 +438,7 @@ async def open_port(
         return AsyncioSerialPort(_ThreadTransport(ser, loop), path_or_url, ser)
     try:
         read_blocks_for_one_byte(ser.fd)
-        transport = _FdTransport(ser.fd, ser)
+        transport = _FdTransport(ser.fd, ser, can_discard=holds_output(ser.fd))
     except BaseException:
         ser.close()
         raise

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
 import trio
 
@@ -45,6 +46,13 @@ class _Driver:
     def __init__(self, port: trio.abc.Stream, endpoint: Endpoint, *, owns_port: bool) -> None:
         self.port = port
         self.ep = endpoint
+        # A port that can drop what it has not sent lets an expedited packet
+        # cut in ahead of it (PROTOCOL.md 11).
+        discard = getattr(port, "discard_output", None)
+        self._discard: Callable[[], object] | None = (
+            discard if callable(discard) and getattr(port, "can_discard_output", False) else None
+        )
+        endpoint.line_discards = self._discard is not None
         self.owns_port = owns_port
         self.generation = 0
         self.broken: LinkBroken | None = None
@@ -149,6 +157,8 @@ class _Driver:
             if data:
                 self._writer_idle = False
                 try:
+                    if self.ep.take_discard() and self._discard is not None:
+                        self._discard()
                     await self.port.send_all(data)
                 except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
                     cause = LineFailed(f"writing to the line failed: {exc!r}")

@@ -187,6 +187,11 @@ DATA_GAP_SILENCE = 4
 peer's data packets: the next may be twice as long (the measured length at
 most doubles a step) and one may be lost."""
 
+PREEMPT_AFTER = 0.05
+"""Seconds of earlier bytes in the UART an expedited packet waits behind at
+most when the line can drop them (:attr:`Endpoint.line_discards`): beyond
+that it cuts in (PROTOCOL.md 11, "Cutting in")."""
+
 OUTAGE_ROUND_TRIPS = 2
 """Once the round trip is measured, ``dead_after`` rides out an outage of this
 many measured round trips, plus two retransmission timeouts to repair it."""
@@ -286,6 +291,12 @@ class EndpointStatistics:
     doubled_resends: int = 0
     """Resends of packets already resent once, sent twice on a long line
     (PROTOCOL.md 4.4); the second copy is not counted in ``retransmissions``."""
+    preemptions: int = 0
+    """Times an expedited message had the UART's queue dropped to go first
+    (:attr:`Endpoint.line_discards`, PROTOCOL.md 11)."""
+    preempted_resends: int = 0
+    """Packets sent again because such a drop may have cut them; counted in
+    ``retransmissions`` but not as losses."""
     early_sent: int = 0
     """Bytes of our stream our connection request carried (early data,
     PROTOCOL.md section 13)."""
@@ -431,9 +442,19 @@ class Endpoint:
                 "ignored_packets",
                 "idle_copies",
                 "doubled_resends",
+                "preemptions",
+                "preempted_resends",
             ),
             0,
         )
+        self.line_discards = False
+        """The I/O adapter can drop bytes handed to the line and not yet
+        sent (a port's output flush): an expedited packet then cuts in
+        ahead of them (:meth:`take_discard`, PROTOCOL.md 11).  The drivers
+        set it from the port (``can_discard_output``); off by default."""
+        self._discard_due = False
+        self._control_done_at: float = -math.inf  # (set per connection)
+        self._reack: bool = False
         self._state: State = State.IDLE
         self._reset_connection()
 
@@ -821,17 +842,41 @@ class Endpoint:
                 break
 
     def data_to_send(self, now: float) -> bytes:
-        """Bytes to write to the line now (control first, then paced data)."""
+        """Bytes to write to the line now (control first, then paced data).
+
+        With :attr:`line_discards`, call :meth:`take_discard` after each call
+        and before writing what it returned."""
         out: list[bytes] = []
+        queued_until = self._pacer.free_at
+        control_until = self._control_done_at
         for wire in self._control:
             out.append(wire)
-            self._account(wire, now)
+            self._control_done_at = self._account(wire, now)
         self._control.clear()
         if self._state is State.ESTABLISHED and self._negotiated is not None:
+            if queued_until is not None and self._preempt_due(queued_until, now):
+                self._preempt(queued_until, control_until, now, out)
             self._release_expedited(now, out)
+            if self._reack:
+                # Our last ACK may have been among the bytes dropped.
+                self._reack = False
+                self._queue_ack(self._receiver.last_in_order())
+                for wire in self._control:
+                    out.append(wire)
+                    self._control_done_at = self._account(wire, now)
+                self._control.clear()
             self._release_data(now, out)
             self._release_latest(now, out)
         return b"".join(out)
+
+    def take_discard(self) -> bool:
+        """Whether the port must drop what it holds unsent before the bytes
+        the last :meth:`data_to_send` returned are written (an expedited
+        packet cuts in: PROTOCOL.md 11); True once per such call.  Only with
+        :attr:`line_discards`; the endpoint has already arranged to resend
+        whatever the drop may cut."""
+        due, self._discard_due = self._discard_due, False
+        return due
 
     def get_timer(self) -> float | None:
         """When :meth:`handle_timer` must next be called, or None."""
@@ -958,6 +1003,8 @@ class Endpoint:
             latest_superseded=self._lrecv.superseded,
             idle_copies=c["idle_copies"],
             doubled_resends=c["doubled_resends"],
+            preemptions=c["preemptions"],
+            preempted_resends=c["preempted_resends"],
             packet_length=self._length.length,
             byte_error_rate=self._length.byte_error_rate,
             early_sent=len(self._early or b""),
@@ -997,6 +1044,10 @@ class Endpoint:
         self._pair_lead_acked: float | None = None
         self._pair_settled: float | None = None
         self._last_first: tuple[Outstanding, float] | None = None
+        self._control_done_at = -math.inf
+        self._preempted: set[int] = set()
+        self._discard_due = False
+        self._reack = False
         self._clock = 0.0
         self._pacer.probe = self._pair_due()
         self._last_heard = 0.0
@@ -1897,6 +1948,40 @@ class Endpoint:
         tx = self._tx(self._full_wire)
         return tx > 0 and self._rtt_or_path() >= IDLE_COPY_MIN_PACKETS * tx
 
+    def _preempt_due(self, queued_until: float, now: float) -> bool:
+        """An expedited packet is due, and the line can drop the earlier
+        bytes that would otherwise hold it more than PREEMPT_AFTER."""
+        return self.line_discards and queued_until - now > PREEMPT_AFTER and self._xsend.has_due()
+
+    def _preempt(
+        self, queued_until: float, control_until: float, now: float, out: list[bytes]
+    ) -> None:
+        """Cut in (PROTOCOL.md 11): the port drops what it holds unsent
+        (:meth:`take_discard`) before this call's bytes go, so the expedited
+        packet waits behind none of it.  Whatever the drop may have cut --
+        every packet whose modelled departure was still to come -- goes
+        again: data packets through the resend queue (not counted as losses:
+        the packet length stays), lane fragments and the latest value at
+        once, our ACK behind the expedited packet.  A packet the model
+        wrongly thought cut reaches the peer twice and is dropped there as
+        a duplicate; one it wrongly thought sent is repaired as a loss."""
+        self._discard_due = True
+        self._counters["preemptions"] += 1
+        self._pacer.pull_back(queued_until - now, now)
+        s = self._sender
+        self._preempted = {seq for seq in self._preempted if seq in s.outstanding}
+        cut = s.requeue_unsent(now)
+        self._preempted.update(cut)
+        self._counters["preempted_resends"] += len(cut)
+        self._xsend.requeue_unsent(now)
+        self._lsend.requeue_unsent(now)
+        # Rate samples across the drop would count bytes that never left.
+        self._rate.void(now)
+        self._pair = None
+        self._pair_lead_acked = None
+        self._last_first = None
+        self._reack = control_until > now
+
     def _release_expedited(self, now: float, out: list[bytes]) -> None:
         """Expedited fragments go out at once, ahead of paced data: they wait
         only behind what the UART already holds (the pacer keeps that under
@@ -1946,13 +2031,21 @@ class Endpoint:
             pkt = s.pop_retransmit()
             assert pkt is not None
             self._counters["retransmissions"] += 1
-            self._length.lost()
-            self._adapt_length(clean=False)
-            self._length.sent(len(pkt.wire))
+            preempted = pkt.seq in self._preempted
+            if preempted:
+                # Cut by an expedited packet's drop, not lost: the packet
+                # length does not pay for it.
+                self._preempted.discard(pkt.seq)
+            else:
+                self._length.lost()
+                self._adapt_length(clean=False)
+                self._length.sent(len(pkt.wire))
             self._transmit(pkt, now, timeout, out)
             if (
-                pkt.transmissions >= DOUBLE_FROM_COPY or not s.has_new_data()
-            ) and self._long_line():
+                not preempted
+                and (pkt.transmissions >= DOUBLE_FROM_COPY or not s.has_new_data())
+                and self._long_line()
+            ):
                 # Lost on its resend too: it has held the window's base for
                 # two round trips, and a third loss would add another.  Two
                 # copies back to back make that one in 400 instead of one

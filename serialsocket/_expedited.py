@@ -77,6 +77,7 @@ class Fragment:
         deadline: when the current copy is given up as lost (inf: not armed).
         order: a stamp that grows with every copy handed to the line, so an
             acknowledgement tells which copies left before the one it answers.
+        done_at: when the current copy finishes leaving the UART.
     """
 
     seq: int
@@ -86,6 +87,7 @@ class Fragment:
     transmissions: int = 0
     deadline: float = math.inf
     order: int = 0
+    done_at: float = -math.inf
 
 
 @dataclass(slots=True)
@@ -141,6 +143,25 @@ class ExpeditedSender:
                 self.due.append(frag.seq)
                 self.next += 1
 
+    def has_due(self) -> bool:
+        """A fragment waits to be handed to the line (new or a resend)."""
+        due = self.due
+        while due and due[0] not in self.outstanding:
+            due.popleft()
+        return bool(due)
+
+    def requeue_unsent(self, now: float) -> int:
+        """Schedule again every fragment whose copy was still to leave the
+        UART at ``now`` (the port dropped it); returns how many."""
+        count = 0
+        for seq in sorted(self.outstanding):
+            frag = self.outstanding[seq]
+            if frag.deadline < math.inf and frag.done_at > now:
+                frag.deadline = math.inf
+                self.due.append(seq)
+                count += 1
+        return count
+
     def pop_due(self) -> Fragment | None:
         """The next fragment to hand to the line (new or a resend), or None."""
         while self.due:
@@ -159,6 +180,7 @@ class ExpeditedSender:
         if frag.transmissions:
             self.retransmissions += 1
         frag.transmissions += 1
+        frag.done_at = done_at
         self._order += 1
         frag.order = self._order
         frag.deadline = done_at + min(timeout * 2 ** (frag.transmissions - 1), ceiling)

@@ -78,6 +78,7 @@ class LatestSender:
         transmissions: copies of ``number`` handed to the line.
         deadline: when that copy is given up as lost (inf: not armed).
         resend_due: the timer ran out with nothing newer to send.
+        done_at: when that copy finishes leaving the UART.
     """
 
     pending: bytes | None = None
@@ -87,6 +88,7 @@ class LatestSender:
     transmissions: int = 0
     deadline: float = math.inf
     resend_due: bool = False
+    done_at: float = -math.inf
     offered: int = 0
     coalesced: int = 0
     sent_values: int = 0
@@ -133,7 +135,17 @@ class LatestSender:
         self.wire = wire
         self.transmissions += 1
         self.resend_due = False
+        self.done_at = done_at
         self.deadline = done_at + min(timeout * 2 ** (self.transmissions - 1), ceiling)
+
+    def requeue_unsent(self, now: float) -> bool:
+        """The unacknowledged value's copy was still to leave the UART at
+        ``now`` (the port dropped it): resend it at once.  Returns whether."""
+        if self.unacknowledged and self.deadline < math.inf and self.done_at > now:
+            self.deadline = math.inf
+            self.resend_due = True
+            return True
+        return False
 
     def expired(self, now: float) -> bool:
         """Whether the last value's copy timed out (the resend is then due

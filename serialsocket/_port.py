@@ -44,6 +44,8 @@ from ._pyserial import (
     PTY_MASTER_CLOSE_GRACE,
     PortStatistics,
     check_line_settings,
+    discard_unsent,
+    holds_output,
     open_serial,
     port_encoding,
     read_blocks_for_one_byte,
@@ -64,6 +66,9 @@ _THREAD_QUEUE = 16
 
 
 class _Transport(Protocol):
+    can_discard: bool
+
+    def discard_output(self) -> None: ...
     async def send_all(self, data: bytes | bytearray | memoryview) -> None: ...
     async def wait_send_all_might_not_block(self) -> None: ...
     async def receive_some(self, max_bytes: int) -> bytes: ...
@@ -159,6 +164,30 @@ class SerialPort(trio.abc.Stream):
         self._writes += 1
         self._bytes_out += len(data)
 
+    @property
+    def can_discard_output(self) -> bool:
+        """:meth:`discard_output` drops something: a serial device, not a
+        pty (which hands every write to its other side at once) or a URL."""
+        return self._t.can_discard
+
+    def discard_output(self) -> None:
+        """Drop the bytes written and not yet sent (``tcflush(TCOFLUSH)``):
+        what a serial socket does before an expedited message so that it
+        waits behind none of them (PROTOCOL.md 11).  Call it between writes,
+        not during one.  A UART's hardware FIFO (16 bytes on a 16550) may
+        still go out.  Without :attr:`can_discard_output` there is nothing
+        of ours to drop and nothing happens.
+
+        Raises:
+            trio.ClosedResourceError: the port was closed.
+            trio.BrokenResourceError: the device failed (``__cause__`` is the OSError).
+        """
+        self._check_open()
+        try:
+            self._t.discard_output()
+        except OSError as exc:
+            raise self._map(exc) from exc
+
     async def wait_send_all_might_not_block(self) -> None:
         """Wait until a write would not block (or the port failed)."""
         self._check_open()
@@ -228,13 +257,22 @@ def _cause_of(exc: BaseException) -> BaseException | None:
 class _FdTransport:
     """``FdStream`` over a duplicate of a device's fd; the pyserial object is closed last."""
 
-    def __init__(self, fd: int, owner: Any = None) -> None:
+    def __init__(self, fd: int, owner: Any = None, *, can_discard: bool = False) -> None:
         # FdStream takes ownership of the fd it is given and sets O_NONBLOCK on
         # the open file description; it gets its own duplicate so that pyserial
         # (which keeps the termios settings and closes its fd) and trio never
         # close the same number twice.
         self._stream = trio.lowlevel.FdStream(os.dup(fd))
         self._owner = owner
+        self.can_discard = can_discard
+
+    def discard_output(self) -> None:
+        if not self.can_discard:
+            return
+        fd = self._stream.fileno()
+        if fd < 0:
+            raise trio.ClosedResourceError("file was already closed")
+        discard_unsent(fd)
 
     async def send_all(self, data: bytes | bytearray | memoryview) -> None:
         await self._stream.send_all(data)
@@ -289,6 +327,7 @@ class _ThreadTransport:
 
     def __init__(self, ser: Any) -> None:
         self._ser = ser
+        self.can_discard = False
         self._stop = threading.Event()
         send, self._receive = trio.open_memory_channel[bytes | BaseException](_THREAD_QUEUE)
         self._token = trio.lowlevel.current_trio_token()
@@ -335,6 +374,11 @@ class _ThreadTransport:
                 break
             data += chunk
         return bytes(data)
+
+    def discard_output(self) -> None:
+        # A URL has no UART queue of ours to drop (socket:// hands bytes to
+        # TCP, loop:// has delivered them already): nothing to do.
+        return
 
     async def send_all(self, data: bytes | bytearray | memoryview) -> None:
         view = memoryview(data).cast("B")
@@ -432,7 +476,7 @@ async def open_port(
         return SerialPort(_ThreadTransport(ser), path_or_url, ser)
     try:
         read_blocks_for_one_byte(ser.fd)
-        transport = _FdTransport(ser.fd, ser)
+        transport = _FdTransport(ser.fd, ser, can_discard=holds_output(ser.fd))
     except BaseException:
         ser.close()
         raise

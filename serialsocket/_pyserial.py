@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import errno
 import os
+import sys
 import termios
 from dataclasses import dataclass
 from typing import Any
@@ -184,6 +185,38 @@ def open_serial(
         raise OSError(
             exc.errno, f"cannot open {path_or_url!r}: {why} (check the path and its permissions)"
         ) from exc
+
+
+_PTY_MAJORS = range(128, 144)
+"""Linux's device numbers of Unix98 pseudo-terminals (masters 128-135,
+slaves 136-143)."""
+
+
+def holds_output(fd: int) -> bool:
+    """Whether ``fd`` is a line that keeps written bytes until they are sent,
+    so that :func:`discard_unsent` can drop them: a serial device, not a
+    pseudo-terminal (a pty hands each write to its other side at once, and
+    ``TCOFLUSH`` drops nothing there)."""
+    try:
+        st = os.fstat(fd)
+        name = os.ttyname(fd)
+    except OSError:
+        return False
+    if name.startswith("/dev/pts/") or name == "/dev/ptmx":
+        return False
+    return not (sys.platform.startswith("linux") and os.major(st.st_rdev) in _PTY_MAJORS)
+
+
+def discard_unsent(fd: int) -> None:
+    """Drop what was written to ``fd`` and not yet sent (``tcflush(TCOFLUSH)``).
+
+    Raises:
+        OSError: the descriptor is not a terminal, or closed.
+    """
+    try:
+        termios.tcflush(fd, termios.TCOFLUSH)
+    except termios.error as exc:  # not an OSError subclass
+        raise OSError(*exc.args) from exc
 
 
 def read_blocks_for_one_byte(fd: int) -> None:

@@ -217,6 +217,7 @@ class RateEstimator:
         """A queued run: its first delivery's time, that packet's
         ``handed_end``, deliveries since, and when that packet was handed over."""
         self._reverse_at = -math.inf
+        self._void_at = -math.inf
         self.last_delivery: tuple[float, RateMark] | None = None
         """When the last first copy was acknowledged, and its mark."""
         self._loose = 0
@@ -266,6 +267,11 @@ class RateEstimator:
         """A packet carrying the peer's data arrived: the ACKs behind it on
         the peer's line were delayed by it, not by ours."""
         self._reverse_at = now
+
+    def void(self, now: float) -> None:
+        """The port dropped bytes it had not sent (an expedited packet cut
+        in): samples across ``now`` would count them as delivered."""
+        self._void_at = now
 
     @property
     def reverse_at(self) -> float:
@@ -384,7 +390,7 @@ class RateEstimator:
         if not fast and (self.base_rtt is None or rtt < self.base_rtt) and self.plausible(rtt):
             self.base_rtt = rtt
         # The peer's data crossed the interval: its ACKs were timed by its line.
-        tainted = self._reverse_at > mark.point_time
+        tainted = max(self._reverse_at, self._void_at) > mark.point_time
         if self._loose > 0 and not fast and not tainted and self.init_rtt is not None:
             # A seed still to be trusted: the first deliveries tighten it.
             # A bound never to be trusted (-1) is not moved by these model-
@@ -525,7 +531,7 @@ class RateEstimator:
         :data:`PAIR_FASTER_THAN_HINT` of a hint, :data:`PAIR_FASTER` of any
         other).
         """
-        if spacing <= 0 or self._reverse_at > sent_at:
+        if spacing <= 0 or max(self._reverse_at, self._void_at) > sent_at:
             return None
         # Never below what the ACK clock has already seen the line deliver.
         line = max(wire_bytes / spacing, self.measured or 0.0)
@@ -590,7 +596,7 @@ class RateEstimator:
         if not queued:
             self._run = None
             return None
-        if self._run is not None and self._reverse_at > self._run[0]:
+        if self._run is not None and max(self._reverse_at, self._void_at) > self._run[0]:
             self._run = None  # the peer's data arrived within the run: start again
         if self._run is None:
             self._run = (now, mark.handed_end, 0, mark.sent_at)

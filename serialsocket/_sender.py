@@ -337,6 +337,22 @@ class Sender:
         if len(self.retransmit) > 1 and self.retransmit[-2] > seq:
             self.retransmit = deque(sorted(self.retransmit))
 
+    def requeue_unsent(self, now: float) -> list[int]:
+        """Schedule for resending every unacknowledged packet whose last copy
+        was still to leave the UART at ``now`` (the port dropped what it had
+        not sent); returns their numbers."""
+        cut = [
+            seq
+            for seq, pkt in self.outstanding.items()
+            if not pkt.acked
+            and pkt.deadline is not None
+            and seq not in self._queued
+            and pkt.done_at > now
+        ]
+        for seq in cut:
+            self.schedule(seq)
+        return cut
+
     def has_retransmit(self) -> bool:
         """A packet waits to be sent again."""
         self._drop_stale_head()

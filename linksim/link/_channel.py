@@ -218,6 +218,29 @@ class LinkEnd(trio.abc.HalfCloseableStream):
         finally:
             self._sending = False
 
+    @property
+    def can_discard_output(self) -> bool:
+        """:meth:`discard_output` can drop something: the line has a rate
+        (a UART that holds what it has not sent)."""
+        return self._out.engine.config.rate is not None
+
+    def discard_output(self) -> int:
+        """Drop what this end wrote that has not left its UART yet, as a
+        serial port's output flush does (:meth:`serialsocket.SerialPort.discard_output`);
+        returns the bytes dropped.  A no-op on a line without a rate: its
+        bytes leave the moment they are written.
+
+        Raises:
+            trio.ClosedResourceError: this end is closed.
+        """
+        if self.closed:
+            raise trio.ClosedResourceError("this end is closed")
+        dropped = self._out.engine.discard(self._link.now())
+        if dropped:
+            self._out.tx_lot.unpark_all()  # room for a blocked sender
+            self._out.rx_lot.unpark_all()  # the receiver's next arrival moved
+        return dropped
+
     async def wait_send_all_might_not_block(self) -> None:
         """Return once :meth:`send_all` can queue at least one byte without blocking."""
         if self._sending:

@@ -53,9 +53,11 @@ class DirectionStatistics:
     ``bytes_sent`` counts writes; ``bytes_delivered`` what :meth:`receive`
     handed out (including inserted bytes); ``bytes_in_flight`` what is decided
     but not yet delivered; ``bytes_held`` what waits for a scripted-fault match
-    to be settled.  ``bytes_delayed`` counts delivered-to-be bytes that arrive
-    later than they were written, ``max_latency``/``total_latency`` are seconds
-    from write to arrival over those bytes.  ``bursts`` is the number of
+    to be settled.  ``bytes_discarded`` what a :meth:`LinkDirection.discard`
+    (an output flush) dropped before it left the UART.  ``bytes_delayed``
+    counts delivered-to-be bytes that arrive later than they were written,
+    ``max_latency``/``total_latency`` are seconds from write to arrival over
+    those bytes.  ``bursts`` is the number of
     Gilbert-Elliott bad states that met at least one byte (a fade on an idle
     line harms nothing and is not counted) and ``burst_bytes`` the bytes sent
     in one.
@@ -83,6 +85,7 @@ class DirectionStatistics:
     bursts: int = 0
     burst_bytes: int = 0
     faults_fired: int = 0
+    bytes_discarded: int = 0
 
 
 def _find_all(buf: bytes, pattern: bytes, wildcard: int | None) -> list[int]:
@@ -109,14 +112,37 @@ def _proper_prefix_suffix(buf: bytes, pattern: bytes, wildcard: int | None) -> i
 
 
 class _Segment:
-    """Decided bytes awaiting delivery; ``times`` is one float when they all arrive together."""
+    """Decided bytes awaiting delivery; ``times`` is one float when they all
+    arrive together, ``deps`` when each finishes leaving the UART (one float
+    when they all left at once: a line without a rate)."""
 
-    __slots__ = ("data", "offset", "times")
+    __slots__ = ("data", "deps", "offset", "times")
 
-    def __init__(self, data: bytes, times: _F64 | float) -> None:
+    def __init__(self, data: bytes, times: _F64 | float, deps: _F64 | float) -> None:
         self.data = data
         self.times = times
+        self.deps = deps
         self.offset = 0  # bytes already delivered
+
+    def departed_by(self, now: float) -> int:
+        """Index after the last byte that has left the UART by ``now``."""
+        d = self.deps
+        if isinstance(d, float):
+            return len(self.data) if d <= now else 0
+        return int(np.searchsorted(d, now, side="right"))
+
+    def truncate(self, end: int) -> None:
+        """Keep the first ``end`` bytes (not before ``offset``): the rest was
+        discarded before it left the UART."""
+        self.data = self.data[:end]
+        if not isinstance(self.times, float):
+            self.times = self.times[:end]
+        if not isinstance(self.deps, float):
+            self.deps = self.deps[:end]
+
+    def last_arrival(self) -> float:
+        t = self.times
+        return t if isinstance(t, float) else float(t[-1])
 
     def first_arrival(self) -> float:
         t = self.times
@@ -302,6 +328,43 @@ class LinkDirection:
             self._held = b""
             self._decide(raw, deps, arrivals, writes)
 
+    def discard(self, now: float) -> int:
+        """Drop every byte written and not yet serialised at ``now``, as a
+        serial port's output flush (``tcflush(TCOFLUSH)``) does; the
+        character in the shift register still goes.  What was dropped never
+        reaches the far end (its fate, already drawn, is void).  Returns the
+        bytes dropped (counted in ``bytes_discarded``)."""
+        cutoff = now + self._c  # the character being shifted out finishes
+        if self._c == 0.0 or self._last_departure <= cutoff:
+            return 0
+        dropped = 0
+        if self._held:
+            keep = int(np.searchsorted(self._held_deps, cutoff, side="right"))
+            dropped += len(self._held) - keep
+            self._held = self._held[:keep]
+            self._held_deps = self._held_deps[:keep]
+            self._held_arrivals = self._held_arrivals[:keep]
+            self._held_writes = self._held_writes[:keep]
+        segments = self._segments
+        while segments:
+            seg = segments[-1]
+            # Delivered bytes have arrived, so they left the UART long ago.
+            end = max(seg.departed_by(cutoff), seg.offset)
+            if end >= len(seg.data):
+                break
+            gone = len(seg.data) - end
+            dropped += gone
+            self._in_flight -= gone
+            if end == 0:
+                segments.pop()
+                continue
+            seg.truncate(end)
+            break
+        self._last_departure = cutoff
+        self._last_arrival = segments[-1].last_arrival() if segments else -math.inf
+        self._counts["bytes_discarded"] += dropped
+        return dropped
+
     # -- internals -------------------------------------------------------------
 
     def _hold_length(self, buf: bytes) -> int:
@@ -325,14 +388,14 @@ class LinkDirection:
             # Fast path (clean, no rate): the whole write arrives at one instant.
             at = max(float(arrivals[-1]), self._last_arrival)
             self._last_arrival = at
-            self._queue(raw, at, writes)
+            self._queue(raw, at, writes, float(deps[-1]))
             return
         if cfg.jitter:
             arrivals = arrivals + self._rng_jitter.random(n) * cfg.jitter
         if clean:
             arrivals = np.maximum.accumulate(np.maximum(arrivals, self._last_arrival))
             self._last_arrival = float(arrivals[-1])
-            self._queue(raw, arrivals, writes)
+            self._queue(raw, arrivals, writes, deps)
             return
 
         values = np.frombuffer(raw, dtype=np.uint8).copy()
@@ -393,16 +456,19 @@ class LinkDirection:
         out = np.empty(total, dtype=np.uint8)
         times = np.empty(total, dtype=np.float64)
         out_writes = np.empty(total, dtype=np.float64)
+        out_deps = np.empty(total, dtype=np.float64)
         kept_at = starts[keep]
         out[kept_at] = values[keep]
         times[kept_at] = arrivals[keep]
         out_writes[kept_at] = writes[keep]
+        out_deps[kept_at] = deps[keep]
         k = int(noise.sum())
         if k:
             noise_at = starts[noise] + keep[noise]
             out[noise_at] = self._rng_noise.integers(0, 256, size=k, dtype=np.uint8)
             times[noise_at] = arrivals[noise]
             out_writes[noise_at] = np.inf  # inserted bytes are not counted as delayed
+            out_deps[noise_at] = deps[noise]
             counts["inserted_noise"] += k
         if inserts:
             where = np.concatenate([np.full(len(d), starts[i]) for i, d in inserts])
@@ -411,16 +477,18 @@ class LinkDirection:
             out = np.insert(out, where, blob)
             times = np.insert(times, where, t_ins)
             out_writes = np.insert(out_writes, where, np.full(len(blob), np.inf))
+            d_ins = np.concatenate([np.full(len(d), deps[i]) for i, d in inserts])
+            out_deps = np.insert(out_deps, where, d_ins)
             counts["inserted_scripted"] += len(blob)
         if len(out) == 0:
             return
         times = np.maximum.accumulate(np.maximum(times, self._last_arrival))
         self._last_arrival = float(times[-1])
-        self._queue(out.tobytes(), times, out_writes)
+        self._queue(out.tobytes(), times, out_writes, out_deps)
 
-    def _queue(self, data: bytes, times: _F64 | float, writes: _F64) -> None:
+    def _queue(self, data: bytes, times: _F64 | float, writes: _F64, deps: _F64 | float) -> None:
         """Queue decided bytes for delivery and account their latency."""
-        self._segments.append(_Segment(data, times))
+        self._segments.append(_Segment(data, times, deps))
         self._in_flight += len(data)
         latency = times - writes
         real = np.isfinite(latency)

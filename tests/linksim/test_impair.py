@@ -346,3 +346,70 @@ def test_gilbert_elliott_jump_threshold_is_the_same_inside_and_across_calls(offs
     inside, bursts_inside = states(100)  # the gap inside the first call
     assert (across == inside).all()
     assert bursts_across == bursts_inside
+
+
+# -- an output flush (discard) -----------------------------------------------------------
+
+
+def test_discard_drops_what_has_not_left_the_uart_and_keeps_the_rest() -> None:
+    c = 10 / 2400
+    d = LinkDirection(DirectionConfig(rate=2400, delay=1.3), seed=0)
+    d.send(b"A" * 100, 0.0)
+    # At 0.1 s, 24 characters have left and the 25th is in the shift register.
+    assert d.discard(0.1) == 75
+    assert d.transmit_done_at() == pytest.approx(0.1 + c)
+    assert d.statistics().bytes_discarded == 75
+    d.send(b"B" * 10, 0.2)  # an idle UART: leaves at once, one delay later
+    assert d.next_delivery() == pytest.approx(c + 1.3)
+    assert d.receive(0.2 + 1.3 + 10 * c + 1e-9) == b"A" * 25 + b"B" * 10
+    assert d.pending() == 0
+
+
+def test_discard_keeps_the_far_ends_timing_of_what_is_left() -> None:
+    """Bytes written after a flush arrive one delay after they leave, not
+    behind the arrival times of the bytes that were dropped."""
+    c = 10 / 2400
+    d = LinkDirection(DirectionConfig(rate=2400, delay=1.3, jitter=0.0), seed=0)
+    d.send(b"x" * 480, 0.0)  # two seconds of line
+    d.discard(0.5)
+    d.send(b"y", 0.5)
+    got = d.receive(0.5 + c + c + 1.3 + 1e-9)
+    assert got.endswith(b"y")
+    assert got.count(b"x") == 121
+
+
+def test_discard_on_a_noisy_line_drops_whole_decided_runs() -> None:
+    cfg = DirectionConfig(rate=9600, delay=0.2, byte_error_rate=1e-2, noise=1e-2)
+    d = LinkDirection(cfg, seed=3)
+    for i in range(10):
+        d.send(bytes([65 + i]) * 200, 0.0)
+    dropped = d.discard(0.5)
+    left = d.receive(100.0)
+    assert dropped > 0
+    # What was kept left the UART by 0.5 s (plus the character in flight): at
+    # most 481 written bytes, give or take the noise the line inserted.
+    assert len(left) < 481 * 1.05
+    assert d.pending() == 0
+    assert d.statistics().bytes_discarded == dropped
+
+
+def test_discard_is_a_no_op_without_a_rate_or_with_nothing_queued() -> None:
+    d = LinkDirection(DirectionConfig(delay=1.0), seed=0)
+    d.send(b"abc", 0.0)
+    assert d.discard(0.0) == 0
+    assert d.receive(1.0) == b"abc"
+    e = LinkDirection(DirectionConfig(rate=2400), seed=0)
+    e.send(b"abc", 0.0)
+    assert e.discard(1.0) == 0
+    assert e.receive(1.0) == b"abc"
+
+
+def test_discard_also_drops_bytes_held_for_a_scripted_match() -> None:
+    fault = ScriptedFault(action=FaultAction.DROP, packet=2, starts_with=b"\x01 ")
+    d = LinkDirection(DirectionConfig(rate=2400, faults=(fault,)), seed=0)
+    d.send(b"hello\x01", 0.0)  # the MARK is held: it may start a match
+    assert d.statistics().bytes_held == 1
+    assert d.discard(0.0) == 5  # everything after the first character
+    assert d.statistics().bytes_held == 0
+    d.flush()
+    assert d.receive(10.0) == b"h"

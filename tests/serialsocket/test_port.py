@@ -321,3 +321,84 @@ def test_an_asyncio_pty_master_waits_too() -> None:
         return got
 
     assert asyncio.run(main()) == b"the last ACK"
+
+
+# -- dropping what was not sent (an expedited packet cuts in: PROTOCOL.md 11) ---------
+
+
+def test_a_pty_has_nothing_of_ours_to_drop() -> None:
+    """A pty hands each write to its other side at once (TCOFLUSH drops
+    nothing there), so a serial socket on it does not cut in: it would only
+    send again what already went."""
+    from serialsocket._pyserial import holds_output
+
+    async def main() -> None:
+        a, b = open_pty_pair()
+        async with a, b:
+            assert not a.can_discard_output
+            assert not b.can_discard_output
+            await a.send_all(b"kept")
+            a.discard_output()  # nothing happens
+            assert await read_exactly(b, 4) == b"kept"
+            device = await open_port(b.name, 2400)
+            async with device:
+                assert not device.can_discard_output
+                assert not holds_output(device.serial.fd)
+        with pytest.raises(trio.ClosedResourceError):
+            a.discard_output()
+
+    run(main)
+
+
+def test_a_flush_that_fails_is_the_ports_broken_error() -> None:
+    """The flush itself (forced on a descriptor that is no terminal): its
+    termios error, not an OSError, becomes the port's broken error."""
+    import os
+
+    from serialsocket._port import _FdTransport
+
+    async def main() -> None:
+        r, w = os.pipe()
+        try:
+            port = SerialPort(_FdTransport(w, can_discard=True), "a pipe")
+            assert port.can_discard_output
+            with pytest.raises(trio.BrokenResourceError, match="a pipe failed") as info:
+                port.discard_output()
+            assert isinstance(info.value.__cause__, OSError)
+            assert port.statistics().errors == 1
+            await port.aclose()
+        finally:
+            os.close(r)
+            os.close(w)
+
+    run(main)
+
+
+def test_the_asyncio_port_says_the_same() -> None:
+    import asyncio
+    import os
+
+    import serialsocket.asyncio as sa
+    from serialsocket._asyncio_port import AsyncioSerialPort
+    from serialsocket._asyncio_port import _FdTransport as AsyncFd
+
+    async def main() -> None:
+        master, slave = sa.open_pty_pair()
+        assert not master.can_discard_output
+        master.discard_output()
+        await master.aclose()
+        await slave.aclose()
+        with pytest.raises(OSError, match="was closed"):
+            master.discard_output()
+        r, w = os.pipe()
+        try:
+            port = AsyncioSerialPort(AsyncFd(w, can_discard=True), "a pipe")
+            with pytest.raises(OSError, match=r"Inappropriate ioctl"):
+                port.discard_output()
+            assert port.statistics().errors == 1
+            await port.aclose()
+        finally:
+            os.close(r)
+            os.close(w)
+
+    asyncio.run(main())
