@@ -9,6 +9,8 @@ Usage (the I/O adapter's loop)::
     ...when now >= ep.get_timer(): ep.handle_timer(now)
     ...when now >= ep.get_send_timer(): (paced data may go out)
     ...after any of these:       line.write(ep.data_to_send(now)); handle ep.events()
+    ...(ep.line_discards set: if ep.take_discard() is true, drop the line's
+        unsent bytes before that write -- an expedited packet cuts in)
     ...application:              ep.send(data, now); ep.read(n, now); ep.send_eof(now)
 
 Output pacing
@@ -79,6 +81,7 @@ from ._params import (
     EARLY_INIT_LIMIT,
     LANE_EARLY,
     LONG_SEQ_MODULUS,
+    TIMEOUT_HINT_MAX,
     DataCodec,
     InitParameters,
     Negotiated,
@@ -191,6 +194,14 @@ PREEMPT_AFTER = 0.05
 """Seconds of earlier bytes in the UART an expedited packet waits behind at
 most when the line can drop them (:attr:`Endpoint.line_discards`): beyond
 that it cuts in (PROTOCOL.md 11, "Cutting in")."""
+
+PEER_TIMEOUT_SILENCE = 2
+"""A listener's ``dead_after``, before it measures the round trip, is at
+least this many of the connector's initial timeout (its init's TIMEOUT
+field; twice as many when the field is at its largest): that timeout is
+the connector's hints' round trip and a quarter more, and the listener
+hears nothing between its answer and the connector's first data, a round
+trip later (PROTOCOL.md 5)."""
 
 OUTAGE_ROUND_TRIPS = 2
 """Once the round trip is measured, ``dead_after`` rides out an outage of this
@@ -357,6 +368,7 @@ class Endpoint:
     _answer_sent_at: float
     _answers: int
     _answer_span: float
+    _peer_timeout: float
     """Seconds from our first answer to the latest copy of the init heard after it."""
     _window_key: tuple[int, float | None, int, float | None, int] | None
     _backlog_at: float
@@ -1058,6 +1070,7 @@ class Endpoint:
         self._connect_deadline = math.inf
         self._linger_until = math.inf
         self._answer_span = 0.0
+        self._peer_timeout = 0.0
         self._dead_after = self._liveness()
         self._rtt.ceiling = self._ceiling()
         self._close_deadline = math.inf
@@ -1182,6 +1195,12 @@ class Endpoint:
             return
         try:
             theirs = InitParameters.decode(packet.data)
+            if self._rtt.srtt is None and theirs.timeout_hint:
+                # The connector's patience bounds ours from below until we
+                # measure the round trip (see _peer_patience).
+                self._peer_timeout = theirs.timeout_hint
+                self._dead_after = self._liveness()
+                self._rtt.ceiling = self._ceiling()
             mine = self._mine
             if st is State.LISTEN:
                 # The connector judged that its line needs more than 31
@@ -2240,13 +2259,22 @@ class Endpoint:
             # damaged, and a 60 s verdict ended the link 60 s before the
             # connector's first data could arrive; at 300 s, with twice the
             # span, one damaged copy ended it 6 s before the next.
-            unmeasured = UNMEASURED_DEAD_AFTER + 4 * self._answer_span
+            unmeasured = max(UNMEASURED_DEAD_AFTER + 4 * self._answer_span, self._peer_patience)
             return base if cfg.dead_after is not None else max(base, unmeasured)
         # A receiver's own round trip (its EOF answered at once) says nothing
         # of how far apart the peer's packets come: one with nothing to send
         # judged the link dead 2.2 s into a 768-character packet at 2400 bit/s.
         measured = OUTAGE_ROUND_TRIPS * srtt + 2 * self._rtt.base_timeout()
         return max(base, measured, DATA_GAP_SILENCE * self._data_gap)
+
+    @property
+    def _peer_patience(self) -> float:
+        """What the connector's init says the silence after our answer may
+        last (see PEER_TIMEOUT_SILENCE): 300 s one way with hints left a
+        listener without them judging the link dead 60 s after answering, a
+        round trip before the connector's first data could arrive."""
+        factor = PEER_TIMEOUT_SILENCE * (2 if self._peer_timeout >= TIMEOUT_HINT_MAX else 1)
+        return factor * self._peer_timeout
 
     def _ceiling(self) -> float:
         """The most retransmission backoff may reach: a minute (or 8 initial

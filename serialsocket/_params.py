@@ -188,6 +188,12 @@ def decode18(chars: bytes | bytearray | memoryview) -> int | None:
     return a << 12 | b << 6 | c
 
 
+_TIMEOUT_MS_MAX = 95**3 - 1
+TIMEOUT_HINT_MAX = _TIMEOUT_MS_MAX / 1000
+"""The longest initial timeout the TIMEOUT field carries (857.374 s): a
+sender whose own is longer says this."""
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class InitParameters:
     """One side's init fields, decoded.
@@ -317,6 +323,12 @@ class InitParameters:
             return dataclasses.replace(self, lanes=self.lanes & ~LANE_EARLY, early=None)
         return dataclasses.replace(self, lanes=self.lanes | LANE_EARLY, early=bytes(data))
 
+    @property
+    def timeout_at_least(self) -> bool:
+        """The TIMEOUT field is at its largest value: the sender's initial
+        timeout is that or longer (the field cannot say more)."""
+        return (self.timeout_hint or 0.0) >= TIMEOUT_HINT_MAX
+
     def without_early(self) -> InitParameters:
         """These parameters with no early data and the bit clear: the answer
         of a side that does not deliver the other's early data."""
@@ -325,7 +337,7 @@ class InitParameters:
     def encode(self) -> bytes:
         """The init data field (all printable, no prefixing needed)."""
         n = self.max_packet_length - 7
-        ms = min(max(round((self.timeout_hint or 0.0) * 1000), 0), 95**3 - 1)
+        ms = min(max(round((self.timeout_hint or 0.0) * 1000), 0), _TIMEOUT_MS_MAX)
         fields = [
             tochar(min(94, self.max_packet_length - 2)),
             tochar(min(94, max(0, round(self.timeout_hint or 0)))),

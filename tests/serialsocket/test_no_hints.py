@@ -164,3 +164,41 @@ def test_no_hints_at_300_bit_s_sends_no_storm_of_inits() -> None:
     assert m.retransmissions == 0
     # The line's limit is about 15 bytes a second for random binary, printable.
     assert m.delivered / m.seconds > 13.5
+
+
+@pytest.mark.parametrize("delay", [40.0, 300.0, 1200.0])
+def test_a_listener_without_hints_waits_for_a_hinted_connectors_first_data(
+    delay: float,
+) -> None:
+    """The connector is told the delay, so it sends its init once; the
+    listener, told nothing, hears nothing between its answer and the
+    connector's first data, a round trip later.  Its unmeasured 60 s verdict
+    ended the link first from 40 s one way (at 300 s, 60 s after answering,
+    before the connector had the answer).  Now the connector's initial
+    timeout in its init (TIMEOUT) bounds the listener's patience from below
+    (PROTOCOL.md 5), and the transfer completes."""
+    from serialsocket import Endpoint, State
+
+    from .simlink import SimLink
+
+    a = Endpoint(EndpointConfig(one_way_delay=delay, line_rate=2400))
+    b = Endpoint(EndpointConfig())
+    link = SimLink(a, b, delay=delay, rate=2400)
+    b.listen()
+    a.connect(0.0)
+    data = random.Random(int(delay)).randbytes(3000)
+    sent = 0
+    got = bytearray()
+
+    def settled() -> bool:
+        nonlocal sent
+        if a.state is State.ESTABLISHED and sent < len(data):
+            sent += a.send(data[sent:], link.now)
+        if b.state is State.ESTABLISHED:
+            got.extend(b.read(None, link.now))
+        return len(got) == len(data) or State.DEAD in (a.state, b.state)
+
+    link.run_until(settled, limit=20 * delay)
+    assert b.state is State.ESTABLISHED, b.events()
+    assert bytes(got) == data
+    assert a.statistics().timeouts == 0
