@@ -1058,6 +1058,7 @@ class Endpoint:
         self._last_first: tuple[Outstanding, float] | None = None
         self._control_done_at = -math.inf
         self._preempted: set[int] = set()
+        self._uncut_until = -math.inf
         self._discard_due = False
         self._reack = False
         self._clock = 0.0
@@ -1969,8 +1970,18 @@ class Endpoint:
 
     def _preempt_due(self, queued_until: float, now: float) -> bool:
         """An expedited packet is due, and the line can drop the earlier
-        bytes that would otherwise hold it more than PREEMPT_AFTER."""
-        return self.line_discards and queued_until - now > PREEMPT_AFTER and self._xsend.has_due()
+        bytes that would otherwise hold it more than PREEMPT_AFTER -- but
+        not while a lane packet, or a packet sent again after the last drop,
+        is still leaving: a stream of expedited messages would otherwise cut
+        every data packet (and each other) and nothing would move.  So each
+        drop is followed by the packets it cut, whole, and the stream
+        advances between drops."""
+        return (
+            self.line_discards
+            and queued_until - now > PREEMPT_AFTER
+            and now >= self._uncut_until
+            and self._xsend.has_due()
+        )
 
     def _preempt(
         self, queued_until: float, control_until: float, now: float, out: list[bytes]
@@ -2018,6 +2029,8 @@ class Endpoint:
                 self._counters["retransmissions"] += 1
             done_at = self._account(frag.wire, now)
             self._xsend.sent(frag, done_at, timeout, self._rtt.ceiling)
+            # The lane never cuts its own packets (see _preempt_due).
+            self._uncut_until = max(self._uncut_until, done_at)
 
     def _release_latest(self, now: float, out: list[bytes]) -> None:
         """The newest value, when the pacer has room after the stream's packets
@@ -2053,13 +2066,15 @@ class Endpoint:
             preempted = pkt.seq in self._preempted
             if preempted:
                 # Cut by an expedited packet's drop, not lost: the packet
-                # length does not pay for it.
+                # length does not pay for it, and no drop cuts it again.
                 self._preempted.discard(pkt.seq)
             else:
                 self._length.lost()
                 self._adapt_length(clean=False)
                 self._length.sent(len(pkt.wire))
             self._transmit(pkt, now, timeout, out)
+            if preempted:
+                self._uncut_until = max(self._uncut_until, pkt.done_at)
             if (
                 not preempted
                 and (pkt.transmissions >= DOUBLE_FROM_COPY or not s.has_new_data())
