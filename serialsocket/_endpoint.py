@@ -573,6 +573,7 @@ class Endpoint:
         """End the connection at once, telling the peer why (an E packet)."""
         if self._state not in LIVE:
             return
+        self._clock = max(self._clock, now)
         self._finish_abort(reason, by_peer=False, send=True)
 
     def reset(self) -> None:
@@ -1335,6 +1336,13 @@ class Endpoint:
             self._queue_error(reason)
             self._abort_reason = reason
             self._error_sent_at = self._clock
+            free_at = self._pacer.free_at
+            if self.line_discards and free_at is not None and free_at - self._clock > PREEMPT_AFTER:
+                # Nothing the UART holds matters any more: the E cuts in as
+                # an expedited packet does (PROTOCOL.md 11), so the peer
+                # hears "aborted" a one-way delay later, not behind a queue.
+                self._discard_due = True
+                self._counters["preemptions"] += 1
         self._go(Trigger.REFUSED if self._state is State.CONNECTING else Trigger.ABORT)
         self._events.append(
             ConnectionAborted(reason=reason, by_peer=by_peer, refused=not established and by_peer)

@@ -216,3 +216,35 @@ def test_a_stream_of_expedited_messages_does_not_starve_the_stream() -> None:
     assert [m for _, m in w.lane] == messages
     stats = w.a.statistics()
     assert 0 < stats.preemptions < len(messages) / 2, (stats.preemptions, len(messages))
+
+
+@pytest.mark.parametrize("discards", [True, False])
+def test_an_abort_cuts_in_too(discards: bool) -> None:
+    """The application aborts mid-transfer: its E packet says why.  With a
+    port that drops what it has not sent, nothing the UART holds matters
+    any more and the E goes first: the peer hears it one way after the
+    abort.  Without, it waits behind the packet on the wire and the
+    pacer's horizon."""
+    from serialsocket import ConnectionAborted
+
+    w = _Wire(discards=discards)
+    w.run_until(lambda: w.a.state is State.ESTABLISHED)
+    w.feed(random.Random(4).randbytes(6000))
+    w.run_to(8.0 + PACKET / 2)
+    aborted_at = w.now
+    w.a.abort("operator pressed Ctrl-C", w.now)
+    heard: list[float] = []
+
+    def told() -> bool:
+        if any(isinstance(e, ConnectionAborted) and e.by_peer for e in w.b.events()):
+            heard.append(w.now)
+        return bool(heard)
+
+    w.run_until(told, limit=60.0)
+    latency = heard[0] - aborted_at
+    if discards:
+        assert latency <= 1.3 + 40 * CHAR, latency
+        assert w.flushes == 1
+    else:
+        assert latency > 1.3 + PACKET / 4, latency
+        assert w.flushes == 0
