@@ -62,6 +62,7 @@ class _Driver:
         self._cancel = trio.CancelScope()
         self._stopped = trio.Event()
         self._writer_idle = True
+        self._writer_running = False  # the writer task is alive
         self._flushing = 0  # flush() calls waiting for the writer to go idle
         self._timer_scope: trio.CancelScope | None = None  # the timer task's sleep
         self.reads = self.writes = self.bytes_in = self.bytes_out = 0
@@ -152,6 +153,13 @@ class _Driver:
             # switches per read.
 
     async def _writer(self) -> None:
+        self._writer_running = True
+        try:
+            await self._write_loop()
+        finally:
+            self._writer_running = False
+
+    async def _write_loop(self) -> None:
         while True:
             data = self.ep.data_to_send(self.now())
             if data:
@@ -215,8 +223,32 @@ class _Driver:
                         not self._writer_idle and self.broken is None and not self._stopped.is_set()
                     ):
                         await self.changed()
+                    if not self._writer_running and self.broken is None:
+                        await self._write_last()
             finally:
                 self._flushing -= 1
+
+    async def _write_last(self) -> None:
+        """The writer is gone -- cancelled with its nursery, as Ctrl-C on a
+        command cancels the whole run -- while the endpoint has something to
+        say, the E of an abort: write it here.  Without this a program
+        interrupted mid-transfer left without telling the peer, who judged
+        the link dead long after ("link dead after 26.4 s of silence")
+        instead of reporting that the peer aborted.  Best effort: a port
+        that fails now has nothing more to lose."""
+        data = self.ep.data_to_send(self.now())
+        if not data:
+            return
+        try:
+            if self.ep.take_discard() and self._discard is not None:
+                self._discard()
+            await self.port.send_all(data)
+        except (trio.BrokenResourceError, trio.ClosedResourceError, trio.BusyResourceError):
+            return
+        except OSError:
+            return
+        self.writes += 1
+        self.bytes_out += len(data)
 
     async def stop(self) -> None:
         """Stop the tasks and close the port if it is ours (prompt; shielded)."""
