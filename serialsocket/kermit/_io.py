@@ -49,6 +49,10 @@ from ._params import KermitConfig
 from ._receiver import KermitReceiver
 from ._sender import KermitSender
 
+_ABORT_GRACE = 2.0
+"""Seconds an interrupted transfer may spend writing its E packet (a local
+I/O bound: the line takes it at once unless flow control holds it)."""
+
 _DATE_FORMAT = "%Y%m%d %H:%M:%S"
 """The A packet's date (C-Kermit's ``#`` attribute), local time."""
 _SPACE_MARGIN = 1 << 20
@@ -113,6 +117,41 @@ async def _run(
         KermitTransferError: ``side`` failed; the message ends with
             ``progress(statistics)`` (how far the transfer got).
     """
+    try:
+        failure = await _loop(port, side, on_event)
+    except trio.Cancelled:
+        await _say_interrupted(port, side)
+        raise
+    if failure is not None:
+        stats = side.statistics()
+        raise KermitTransferError(
+            f"{failure.message}; {progress(stats)}", by_peer=failure.by_peer, statistics=stats
+        )
+
+
+async def _say_interrupted(port: trio.abc.Stream, side: KermitSender | KermitReceiver) -> None:
+    """The run was cancelled (Ctrl-C cancels a command's whole run): tell
+    the peer with an E packet, as C-Kermit does, instead of leaving it to
+    retry until its limit.  Shielded and bounded (``_ABORT_GRACE``); a port
+    that fails now has nothing more to lose."""
+    if side.finished:
+        return
+    side.abort("Transfer interrupted", message="the transfer was interrupted")
+    out = side.data_to_send()
+    if not out:
+        return
+    with trio.CancelScope(shield=True), trio.move_on_after(_ABORT_GRACE):
+        try:
+            await port.send_all(out)
+        except (trio.BrokenResourceError, trio.ClosedResourceError, trio.BusyResourceError):
+            return
+
+
+async def _loop(
+    port: trio.abc.Stream,
+    side: KermitSender | KermitReceiver,
+    on_event: Callable[[KermitEvent], None],
+) -> TransferFailed | None:
     failure: TransferFailed | None = None
     while True:
         # Events first: the caller stores what arrived before our ACKs of it
@@ -146,11 +185,7 @@ async def _run(
             side.receive_data(data, now)
         else:
             side.handle_timer(now)
-    if failure is not None:
-        stats = side.statistics()
-        raise KermitTransferError(
-            f"{failure.message}; {progress(stats)}", by_peer=failure.by_peer, statistics=stats
-        )
+    return failure
 
 
 async def kermit_send(
