@@ -142,8 +142,15 @@ async def _say_interrupted(port: trio.abc.Stream, side: KermitSender | KermitRec
         return
     with trio.CancelScope(shield=True), trio.move_on_after(_ABORT_GRACE):
         try:
+            discard = getattr(port, "discard_output", None)
+            if callable(discard) and getattr(port, "can_discard_output", False):
+                # Nothing queued matters any more: the E goes first, as the
+                # serial socket's abort does (PROTOCOL.md 11).
+                discard()
             await port.send_all(out)
         except (trio.BrokenResourceError, trio.ClosedResourceError, trio.BusyResourceError):
+            return
+        except OSError:
             return
 
 

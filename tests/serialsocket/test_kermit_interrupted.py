@@ -56,8 +56,12 @@ def test_an_interrupted_transfer_sends_E_and_the_peer_reports_it(
     assert len(failures) == 1
     assert failures[0].by_peer
     assert "Transfer interrupted" in str(failures[0])
-    # Told within a few seconds -- the E waits behind what the line holds
-    # (4 KB of UART at 9600 bit/s) and for a busy sender to read again --
-    # not after the retry limit (33 tries of 5 s).
-    assert ended_at[0] < 8.0 + 4 * 5.0, ended_at
+    # Not after the retry limit (33 tries of 5 s).  An interrupted sender's
+    # E drops what its UART held and arrives one way later; an interrupted
+    # receiver's reaches a sender that reads again only when its write of a
+    # whole window returns (the Kermit loop is not paced: 10.7 s here).
+    if interrupted == "sender":
+        assert ended_at[0] < 8.0 + 0.3 + 0.1, ended_at
+    else:
+        assert ended_at[0] < 8.0 + 4 * 5.0, ended_at
     assert not (out / "big.bin").exists()
