@@ -18,6 +18,7 @@ builds the sessions on top.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 from collections.abc import Callable
@@ -165,16 +166,12 @@ class _Driver:
             if data:
                 self._writer_idle = False
                 try:
-                    if self.ep.take_discard() and self._discard is not None:
-                        self._discard()
-                    await self.port.send_all(data)
+                    await self._put(data)
                 except (trio.BrokenResourceError, trio.ClosedResourceError, OSError) as exc:
                     cause = LineFailed(f"writing to the line failed: {exc!r}")
                     cause.__cause__ = exc
                     self.fail(cause)
                     return
-                self.writes += 1
-                self.bytes_out += len(data)
                 continue
             self._writer_idle = True
             if self._flushing:
@@ -237,16 +234,18 @@ class _Driver:
         instead of reporting that the peer aborted.  Best effort: a port
         that fails now has nothing more to lose."""
         data = self.ep.data_to_send(self.now())
-        if not data:
-            return
-        try:
-            if self.ep.take_discard() and self._discard is not None:
-                self._discard()
-            await self.port.send_all(data)
-        except (trio.BrokenResourceError, trio.ClosedResourceError, trio.BusyResourceError):
-            return
-        except OSError:
-            return
+        if data:
+            with contextlib.suppress(
+                trio.BrokenResourceError, trio.ClosedResourceError, trio.BusyResourceError, OSError
+            ):
+                await self._put(data)
+
+    async def _put(self, data: bytes) -> None:
+        """Write what ``data_to_send`` returned, after the drop it may ask
+        for (:meth:`Endpoint.take_discard`), and count it."""
+        if self.ep.take_discard() and self._discard is not None:
+            self._discard()
+        await self.port.send_all(data)
         self.writes += 1
         self.bytes_out += len(data)
 

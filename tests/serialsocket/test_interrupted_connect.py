@@ -16,28 +16,9 @@ import trio.testing
 from linksim.link import DirectionConfig, ImpairedLink, LinkConfig, endpoint_config_for
 from serialsocket import PeerAborted, accept, connect
 
+from .borrowed import Borrowed
+
 LINE = LinkConfig.symmetric(DirectionConfig(rate=2400, delay=1.3), seed=1)
-
-
-class _Wire(trio.abc.Stream):
-    """A program's end of a serial line: closing it (the program exiting)
-    does not cut the line, whose bytes still reach the far end -- unlike
-    the simulator's end, which breaks the far end's writes."""
-
-    def __init__(self, end: trio.abc.Stream) -> None:
-        self._end = end
-
-    async def send_all(self, data: bytes | bytearray | memoryview) -> None:
-        await self._end.send_all(data)
-
-    async def wait_send_all_might_not_block(self) -> None:
-        await self._end.wait_send_all_might_not_block()
-
-    async def receive_some(self, max_bytes: int | None = None) -> bytes:
-        return bytes(await self._end.receive_some(max_bytes))
-
-    async def aclose(self) -> None:
-        await trio.lowlevel.checkpoint()
 
 
 def test_a_run_cancelled_mid_transfer_says_so_to_the_peer() -> None:
@@ -68,7 +49,10 @@ def test_a_run_cancelled_mid_transfer_says_so_to_the_peer() -> None:
             # the whole run (serialsocket.interrupt.run_interruptibly).
             with trio.CancelScope() as run:
                 async with trio.open_nursery() as nursery:
-                    sock = await connect(_Wire(line.a), cfg, nursery=nursery)
+                    # Borrowed: the program exiting closes its end, not the
+                    # line (the simulator's end would break the far end's
+                    # writes), as on a real serial line.
+                    sock = await connect(Borrowed(line.a), cfg, nursery=nursery)
                     try:
 
                         async def interrupt() -> None:
