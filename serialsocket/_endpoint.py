@@ -466,7 +466,6 @@ class Endpoint:
         set it from the port (``can_discard_output``); off by default."""
         self._discard_due = False
         self._control_done_at: float = -math.inf  # (set per connection)
-        self._reack: bool = False
         self._state: State = State.IDLE
         self._reset_connection()
 
@@ -862,25 +861,28 @@ class Endpoint:
         out: list[bytes] = []
         queued_until = self._pacer.free_at
         control_until = self._control_done_at
+        self._emit_control(now, out)
+        if self._state is State.ESTABLISHED and self._negotiated is not None:
+            cut = False
+            if queued_until is not None and self._preempt_due(queued_until, now):
+                self._preempt(queued_until, now)
+                cut = True
+            self._release_expedited(now, out)
+            if cut and control_until > now:
+                # Our last ACK may have been among the bytes dropped.
+                self._queue_ack(self._receiver.last_in_order())
+                self._emit_control(now, out)
+            self._release_data(now, out)
+            self._release_latest(now, out)
+        return b"".join(out)
+
+    def _emit_control(self, now: float, out: list[bytes]) -> None:
+        """Queued ACKs, NAKs and E packets go first, and the time the last
+        of them leaves the UART is kept (a drop may cut it: _preempt)."""
         for wire in self._control:
             out.append(wire)
             self._control_done_at = self._account(wire, now)
         self._control.clear()
-        if self._state is State.ESTABLISHED and self._negotiated is not None:
-            if queued_until is not None and self._preempt_due(queued_until, now):
-                self._preempt(queued_until, control_until, now, out)
-            self._release_expedited(now, out)
-            if self._reack:
-                # Our last ACK may have been among the bytes dropped.
-                self._reack = False
-                self._queue_ack(self._receiver.last_in_order())
-                for wire in self._control:
-                    out.append(wire)
-                    self._control_done_at = self._account(wire, now)
-                self._control.clear()
-            self._release_data(now, out)
-            self._release_latest(now, out)
-        return b"".join(out)
 
     def take_discard(self) -> bool:
         """Whether the port must drop what it holds unsent before the bytes
@@ -1061,7 +1063,6 @@ class Endpoint:
         self._preempted: set[int] = set()
         self._uncut_until = -math.inf
         self._discard_due = False
-        self._reack = False
         self._clock = 0.0
         self._pacer.probe = self._pair_due()
         self._last_heard = 0.0
@@ -1991,16 +1992,15 @@ class Endpoint:
             and self._xsend.has_due()
         )
 
-    def _preempt(
-        self, queued_until: float, control_until: float, now: float, out: list[bytes]
-    ) -> None:
+    def _preempt(self, queued_until: float, now: float) -> None:
         """Cut in (PROTOCOL.md 11): the port drops what it holds unsent
         (:meth:`take_discard`) before this call's bytes go, so the expedited
         packet waits behind none of it.  Whatever the drop may have cut --
         every packet whose modelled departure was still to come -- goes
         again: data packets through the resend queue (not counted as losses:
         the packet length stays), lane fragments and the latest value at
-        once, our ACK behind the expedited packet.  A packet the model
+        once (and :meth:`data_to_send` puts our ACK behind the expedited
+        packet).  A packet the model
         wrongly thought cut reaches the peer twice and is dropped there as
         a duplicate; one it wrongly thought sent is repaired as a loss."""
         self._discard_due = True
@@ -2018,7 +2018,6 @@ class Endpoint:
         self._pair = None
         self._pair_lead_acked = None
         self._last_first = None
-        self._reack = control_until > now
 
     def _release_expedited(self, now: float, out: list[bytes]) -> None:
         """Expedited fragments go out at once, ahead of paced data: they wait
