@@ -199,7 +199,7 @@ and noise takes far fewer; a connection that retransmits into a void forever
 hits this long before the time limit.  (Without the allowance per chunk, a
 bulk transfer of 38-character packets held behind a chunk delayed 60 s, its
 sender filling the idle line with copies meanwhile, was called stuck with
-1112 chunks still to arrive: the deep profile's one failure at 7ed8981.)"""
+1112 chunks still to arrive: the deep profile's one failure, at b3ae3f7.)"""
 
 SMALLEST_LENGTH = ENDPOINT_LENGTH.lo
 """The smallest ``max_packet_length`` drawn: the smallest ``EndpointConfig``
