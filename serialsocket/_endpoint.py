@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ._checks import BlockCheck
 from ._config import (
@@ -80,14 +80,20 @@ from ._params import (
     EARLY_ENCODING,
     EARLY_INIT_LIMIT,
     LANE_EARLY,
+    LANE_FLIGHT,
     LONG_SEQ_MODULUS,
+    MAX_FLIGHT_LENGTH,
+    MAX_FLIGHT_PACKETS,
     TIMEOUT_HINT_MAX,
     DataCodec,
+    Flight,
     InitParameters,
     Negotiated,
     decode18,
     encode18,
+    flight_format,
     negotiate,
+    self_agreement,
 )
 from ._parser import PacketParser, PacketReceived, RejectReason
 from ._rate import PAIR_FASTER, RateEstimator, RateMark
@@ -178,6 +184,18 @@ FIRST_FLIGHT_RATE = 960.0
 """Characters a second (9600 bit/s) the first flight assumes at most, with no
 rate yet: it covers the init exchange's round trip at that rate, about when
 the rate pair's verdict comes back (see _compute_effective_window)."""
+
+FLIGHT_SECONDS = 1.0
+"""Seconds of line a first flight sent before the answer covers at most
+(PROTOCOL.md 14): at the line's hinted rate, else at
+:data:`FIRST_FLIGHT_RATE` (960 characters).  The round trip it fills is
+unknown; this is the unhinted init's first timeout, the wait the connector
+commits to anyway, and what a listener that does not take the flight costs
+the line."""
+
+FLIGHT_LENGTH_FACTOR = 2
+"""A first flight's packets are this many times the starting length (see
+:meth:`Endpoint._plan_flight`)."""
 
 FIRST_FLIGHT_MIN = 4
 """Packets the first flight takes at least: the rate pair and two behind it."""
@@ -316,6 +334,17 @@ class EndpointStatistics:
     any, went as ordinary data)."""
     early_received: int = 0
     """Bytes of the peer's stream delivered from its connection request."""
+    flight_announced: int = 0
+    """The most packets our request's first flight announced (PROTOCOL.md
+    section 14), 0 without one."""
+    flight_packets: int = 0
+    """Data packets we sent in a first flight, before the listener's answer."""
+    flight_refused: int = 0
+    """Of those, packets the listener did not take: their bytes went again
+    after the answer (counted once, not as retransmissions)."""
+    flight_received: int = 0
+    """Data packets of the peer's first flight that arrived (copies
+    included): taken, or before the window if not taken."""
     packet_length: int = 0
     """The length (MARK through CHECK) new data packets are cut to: measured
     from the losses unless ``max_packet_length`` fixes it (PROTOCOL.md 4.7)."""
@@ -397,6 +426,27 @@ class Endpoint:
     """Characters the early data added to the init (XEARLY)."""
     _early_in: bytes | None
     """The peer's early data, taken, delivered at establishment."""
+    _flight: Flight | None
+    """Our first flight's announcement, fixed at the first init (PROTOCOL.md 14)."""
+    _flight_bytes: bytearray
+    """The bytes our first flight took from the send queue, in order (put
+    back if the listener does not take it)."""
+    _flight_in: Flight | None
+    """The first flight the request we answered announced."""
+    _flight_taken: bool
+    """We took that first flight: its packets are data of this connection."""
+    _flight_data_seen: bool
+    """A data packet of the peer's first flight (sequence number within its
+    announcement) arrived; :attr:`_peer_data_seen` is for data beyond it."""
+    _accepted_init: bytes | None
+    """The data field of the request we answered (a resend repeats it)."""
+    _flight_drain: float
+    """Seconds a packet sent behind our first flight may wait for it to
+    leave, while the line's rate is unknown (:meth:`_time_flight`)."""
+    _init_chars: int
+    """Characters of our init on the line."""
+    _answer_chars: int
+    """Characters of the answer to it, about (header and check)."""
 
     def __init__(self, config: EndpointConfig | None = None) -> None:
         self.config = config or EndpointConfig()
@@ -456,6 +506,9 @@ class Endpoint:
                 "doubled_resends",
                 "preemptions",
                 "preempted_resends",
+                "flight_packets",
+                "flight_refused",
+                "flight_received",
             ),
             0,
         )
@@ -465,6 +518,7 @@ class Endpoint:
         ahead of them (:meth:`take_discard`, PROTOCOL.md 11).  The drivers
         set it from the port (``can_discard_output``); off by default."""
         self._discard_due = False
+        self._connects = 0  # first flights announced, for their nonces
         self._control_done_at: float = -math.inf  # (set per connection)
         self._state: State = State.IDLE
         self._reset_connection()
@@ -874,6 +928,8 @@ class Endpoint:
                 self._emit_control(now, out)
             self._release_data(now, out)
             self._release_latest(now, out)
+        elif self._state is State.CONNECTING and self._flight is not None:
+            self._release_flight(now, out)
         return b"".join(out)
 
     def _emit_control(self, now: float, out: list[bytes]) -> None:
@@ -923,6 +979,11 @@ class Endpoint:
         spin on it.  None when nothing waits, when the window is shut, or when
         the line rate is unknown (then data is released as soon as it may be).
         """
+        if self._state is State.CONNECTING and self._flight is not None:
+            s, flight = self._sender, self._flight
+            if s.next <= flight.packets and len(s.queue) > len(self._early or b""):
+                return self._pacer.wake()
+            return None
         if self._state is not State.ESTABLISHED:
             return None
         return self._pacing_wake()
@@ -1025,6 +1086,10 @@ class Endpoint:
             early_sent=len(self._early or b""),
             early_delivered=c["early_delivered"],
             early_received=c["early_received"],
+            flight_announced=self._flight.packets if self._flight is not None else 0,
+            flight_packets=c["flight_packets"],
+            flight_refused=c["flight_refused"],
+            flight_received=c["flight_received"],
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -1090,6 +1155,15 @@ class Endpoint:
         self._early = None
         self._early_chars = 0
         self._early_in = None
+        self._flight = None
+        self._flight_bytes = bytearray()
+        self._flight_in = None
+        self._flight_taken = False
+        self._flight_data_seen = False
+        self._flight_drain = 0.0
+        self._init_chars = 0
+        self._answer_chars = 0
+        self._accepted_init = None
         self._answer_sent_at = 0.0
         self._answers = 0
         self._window_key = None
@@ -1114,10 +1188,22 @@ class Endpoint:
         if self._early is None:
             # Fixed at the first copy: every resend carries the same bytes,
             # which stay at the head of the send queue until the answer.
+            # What the init can carry goes in it (a command: it arrives with
+            # the request).  More than that goes in a first flight right
+            # behind the init, densely encoded, and then none in the init:
+            # early data would only lengthen it (and its resends) with the
+            # same bytes in the classic encoding, 0.9 s of an 8 KiB transfer
+            # at 2400 bit/s and 1.3 s (PROTOCOL.md 14).
             self._early = self._early_bytes()
+            if len(self._sender.queue) > len(self._early):
+                self._flight = self._plan_flight(now)
+                if self._flight is not None:
+                    self._early = b""
             self._early_chars = len(EARLY_ENCODING.encode(self._early)) + 2 if self._early else 0
-        init = Packet(seq=0, type=PacketType.INIT, data=self._mine.with_early(self._early).encode())
+        mine = self._mine.with_early(self._early).with_flight(self._flight)
+        init = Packet(seq=0, type=PacketType.INIT, data=mine.encode())
         wire = build_packet(init, BlockCheck.CRC16)
+        self._init_chars = len(wire)
         self._control.append(wire)
         if self._init_transmissions == 0:
             self._first_init_at = now
@@ -1134,6 +1220,54 @@ class Endpoint:
             # nothing unless its first init is lost.
             wait = max(wait, UNHINTED_INIT_TIMEOUT * 2 ** (self._init_transmissions - 1))
         self._init_deadline = now + wait
+
+    def _plan_flight(self, now: float) -> Flight | None:
+        """The first flight to announce in our first init, or None
+        (PROTOCOL.md 14), and the sending side set up to cut it.
+
+        Only with more bytes queued than early data takes, the XLANES field
+        going out and ``first_flight`` on; then no early data goes.  Its packets are cut
+        as the agreement of our own offer with itself says
+        (:func:`self_agreement`); their number covers
+        :data:`FLIGHT_SECONDS` of line at the rate hint (else at
+        :data:`FIRST_FLIGHT_RATE`), or the round trip when the delay is
+        hinted and that is longer."""
+        cfg = self.config
+        if not cfg.first_flight or self._mine.lanes is None or not self._sender.queue:
+            return None
+        assumed = self_agreement(self._mine)
+        length = self._start_length
+        if self._adaptive:
+            # Twice the starting length (at most ``max_packet_time`` of the
+            # hinted line): nothing is measured yet, and the queue the flight
+            # builds delays the ACKs that earn longer packets.  Measured on
+            # the real-time table's lines (virtual replica): 128 characters
+            # left a clean 2400 bit/s line at 0.929 of the line against
+            # 0.934 without a flight; 256, 0.935 (and 0.850 at 1.3 s one way,
+            # from 0.792), while 1e-3 still gained.
+            cap = cfg.measured_length_cap(assumed.send_max_length, self._rate_hint())
+            length = max(length, min(FLIGHT_LENGTH_FACTOR * length, cap))
+        length = min(length, assumed.send_max_length, MAX_FLIGHT_LENGTH)
+        # At most what the unhinted flight takes whatever the hints say: a
+        # rate hint ten times high, trusted, queued 27 s of a 2400 bit/s
+        # line before any answer, timed as if it took 2.7.
+        chars = FIRST_FLIGHT_RATE * FLIGHT_SECONDS
+        if cfg.line_rate is not None:
+            # A slower hinted line: its own second, or the round trip.
+            per_second = cfg.line_rate / cfg.bits_per_char
+            chars = min(chars, per_second * max(FLIGHT_SECONDS, 2 * cfg.one_way_delay))
+        packets = math.ceil(chars / (length + 1))
+        packets = max(1, min(packets, MAX_FLIGHT_PACKETS, assumed.window))
+        self._configure_send(assumed)
+        self._sender.window = self._sender.peer_window = packets
+        # Its packets are the first the rate estimator sees (the init is
+        # the first delivery point; the first two are a rate pair), as the
+        # first packets after the answer are without a flight.
+        self._rate.start(now, None)
+        # Tells a resent request from a restarted connector's (PROTOCOL.md 14).
+        self._connects += 1
+        nonce = (int(now * 1000) + 2731 * self._connects) & 4095
+        return Flight(packets=packets, length=length, nonce=nonce)
 
     def _init_extra_time(self) -> float:
         """Seconds the early data adds to the init on the line (0 with none,
@@ -1179,7 +1313,12 @@ class Endpoint:
             self._go(Trigger.LINGER_EXPIRED)
             return
         if st is State.ESTABLISHED:
-            if self._peer_data_seen:
+            if self._peer_data_seen or (
+                self._flight_data_seen and bytes(packet.data) != self._accepted_init
+            ):
+                # (After first-flight data only, a request that is not the
+                # one we answered -- another nonce -- is a restarted
+                # connector's: PROTOCOL.md 14.)
                 self._finish_abort(
                     "peer restarted: new connection request on a live link",
                     by_peer=True,
@@ -1215,7 +1354,10 @@ class Endpoint:
                 mine = mine.answer(theirs, self._long_offer())
             agreed = negotiate(mine, theirs)
             self._early_in = None
-            if st is State.LISTEN and theirs.early and (mine.lanes or 0) & LANE_EARLY:
+            early_taken = bool(
+                st is State.LISTEN and theirs.early and (mine.lanes or 0) & LANE_EARLY
+            )
+            if early_taken:
                 # Taken: delivered when the connection is (the answer says so).
                 self._early_in = theirs.early
                 self._answer_with = mine
@@ -1224,6 +1366,14 @@ class Endpoint:
                 # simultaneous open): the answer says nothing was delivered,
                 # and the connector sends those bytes as ordinary data.
                 self._answer_with = mine.without_early()
+            self._flight_in = theirs.flight
+            self._flight_taken = self._takes_flight(st, mine, theirs, agreed, early_taken)
+            self._answer_with = self._answer_with.with_flight(None)
+            if self._flight_taken and self._answer_with.lanes is not None:
+                self._answer_with = replace(
+                    self._answer_with, lanes=self._answer_with.lanes | LANE_FLIGHT
+                )
+            self._accepted_init = bytes(packet.data)
         except RemoteProtocolError as exc:
             log.info("refusing connection: %s", exc)
             self._queue_error(exc.error_hint)
@@ -1237,6 +1387,41 @@ class Endpoint:
             return
         self._establish(agreed, now, answer=True)
 
+    def _takes_flight(
+        self,
+        state: State,
+        mine: InitParameters,
+        theirs: InitParameters,
+        agreed: Negotiated,
+        early_taken: bool,
+    ) -> bool:
+        """Whether we take the first flight ``theirs`` announces (PROTOCOL.md
+        14): we take flights, answer at once (a request the application must
+        accept first has its flight's packets dropped meanwhile), took its
+        early data if it has any (the flight's bytes follow them), and the
+        agreement reads its packets as they were cut: the same block check,
+        data encoding and sequence numbers as the request's agreement with
+        itself, a window that holds it, packets no longer than we accept."""
+        flight = theirs.flight
+        if (
+            flight is None
+            or state is not State.LISTEN
+            or not self.config.takes_first_flight
+            or mine.lanes is None  # (our answer could not say it was taken)
+            or not self.config.auto_accept
+            or (theirs.early and not early_taken)
+        ):
+            return False
+        try:
+            assumed = self_agreement(theirs)
+        except RemoteProtocolError:
+            return False
+        return (
+            flight_format(assumed) == flight_format(agreed)
+            and agreed.window >= flight.packets
+            and agreed.receive_max_length >= flight.length
+        )
+
     def _on_init_answer(self, packet: Packet, now: float) -> None:
         if not allowed(self._state, Trigger.INIT_ACKED):
             return
@@ -1246,6 +1431,15 @@ class Endpoint:
         except RemoteProtocolError as exc:
             self._finish_abort(exc.error_hint, by_peer=False, send=True)
             return
+        self._answer_chars = len(packet.data) + 7  # MARK..TYPE, CRC-16, CR
+        taken = self._flight is not None and bool((theirs.lanes or 0) & LANE_FLIGHT)
+        if taken and flight_format(agreed) != flight_format(self_agreement(self._mine)):
+            # Taken, its packets would be read in a format they were not
+            # cut in: a listener that breaks PROTOCOL.md 14.
+            self._finish_abort("Bad init answer: first flight taken", by_peer=False, send=True)
+            return
+        if self._flight is not None and not taken:
+            self._unwind_flight(self._flight)  # (before the early bytes leave the queue)
         if self._early and (theirs.lanes or 0) & LANE_EARLY:
             # The listener delivered our early data: it is not sent again.
             del self._sender.queue[: len(self._early)]
@@ -1266,9 +1460,11 @@ class Endpoint:
             # is longer (60 s one way: aborted with nothing delivered).
             self._rtt.seed(now - self._first_init_at)
             self._measured()
-        self._establish(agreed, now, answer=False)
+        self._establish(agreed, now, answer=False, flight_taken=taken)
 
-    def _establish(self, agreed: Negotiated, now: float, *, answer: bool) -> None:
+    def _establish(
+        self, agreed: Negotiated, now: float, *, answer: bool, flight_taken: bool = False
+    ) -> None:
         self._negotiated = agreed
         self._pending_request = None
         self._go(
@@ -1276,29 +1472,35 @@ class Endpoint:
             if self._state is State.CONNECTING and not answer
             else Trigger.INIT_RECEIVED
         )
-        self._send_check = agreed.check
+        # Our first flight (PROTOCOL.md 14): taken, it is data of this
+        # connection, cut by the format just agreed; else its bytes go again
+        # after it, numbered from the announcement's bound on.
+        flown = self._flight is not None and self._sender.next > 1
+        taken = self._flight is not None and flight_taken and not answer
+        if self._flight is not None and answer:
+            # A simultaneous open: neither side takes the other's flight
+            # (_on_init_answer unwinds a connector's that was not taken).
+            self._unwind_flight(self._flight)
         self._parser.check = agreed.check
-        self._encoding = agreed.encoding
-        # The lanes' messages keep the starting length's fragments: their size
-        # limit must not move with the measured data length.
-        self._capacity = data_capacity(
-            min(agreed.send_max_length, self._start_length), agreed.check
-        )
-        self._long_seq = agreed.long_seq
-        self._sender.modulus = self._receiver.modulus = agreed.modulus
-        self._sender.window = agreed.window
-        self._sender.peer_window = agreed.window
+        self._configure_send(agreed, keep_length=taken and flown)
+        self._receiver.modulus = agreed.modulus
         self._receiver.window = agreed.window
+        if answer and self._flight_in is not None and not self._flight_taken:
+            # The connector's flight was not taken: its packets are before
+            # the window (acknowledged as old, never delivered), and its
+            # data starts again after the announcement's bound.
+            self._receiver.expected = self._flight_in.packets + 1
         self._size_receive_buffer()
         self._peer_length = min(self._start_length, agreed.receive_max_length)
         self._fit_receive_window()
-        self._length = LengthChooser(min(self._start_length, agreed.send_max_length))
-        if not self._adaptive:
-            self._length.length = agreed.send_max_length
-        self._length_changed()
         self._last_heard = now
         self._init_deadline = math.inf
-        self._rate.start(now, self._rtt.srtt if self._init_transmissions == 1 else None)
+        base = self._rtt.srtt if self._init_transmissions == 1 else None
+        if self._flight is not None and not answer:
+            # (Started at the init: _plan_flight.)
+            self._rate.answered(base, self._init_chars * self._init_transmissions)
+        else:
+            self._rate.start(now, base)
         if not answer and self._init_transmissions > 1:
             # A resent init's answer bounds the round trip from above only:
             # the reference that judges later samples plausible, tightened
@@ -1306,6 +1508,9 @@ class Endpoint:
             # 0.02 s "round trip" on a 1.3 s line (an ACK timed from a pacer
             # model running late) made the link dead after 2 s of silence.
             self._rate.seed_base(now - self._first_init_at, trusted_later=False)
+        if taken:
+            self._time_flight(now)
+        self._flight_bytes.clear()
         if answer:
             self._answer_sent_at = now
             self._answers = 1
@@ -1316,6 +1521,63 @@ class Endpoint:
             self._receiver.deliver(self._early_in)
             self._counters["early_received"] += len(self._early_in)
             self._early_in = None
+
+    def _configure_send(self, agreed: Negotiated, *, keep_length: bool = False) -> None:
+        """Cut and number data packets as ``agreed`` says (at establishment,
+        and for a first flight before it: PROTOCOL.md 14)."""
+        self._send_check = agreed.check
+        self._encoding = agreed.encoding
+        # The lanes' messages keep the starting length's fragments: their size
+        # limit must not move with the measured data length.
+        self._capacity = data_capacity(
+            min(agreed.send_max_length, self._start_length), agreed.check
+        )
+        self._long_seq = agreed.long_seq
+        self._sender.modulus = agreed.modulus
+        self._sender.window = agreed.window
+        self._sender.peer_window = agreed.window
+        if not keep_length:
+            # (A flight taken keeps what its packets showed of the line.)
+            self._length = LengthChooser(min(self._start_length, agreed.send_max_length))
+            if not self._adaptive:
+                self._length.length = agreed.send_max_length
+        self._length_changed()
+
+    def _time_flight(self, now: float) -> None:
+        """Our first flight was taken: time its packets, armed before any
+        round trip was known.  With the line's rate unknown they wait in
+        the UART's queue for as long as it takes (an unpaced sender hands
+        them at once), so each one's timer allows its place in that queue
+        at the slowest rate the init exchange allows: its two packets
+        crossed in one round trip.  Packets sent behind the flight before
+        a rate is measured wait behind all of it (:attr:`_flight_drain`).
+        Without this, 3 packets of 384 characters at 2400 bit/s timed out
+        while still queued, and the resends joined the queue: a storm.
+        Too long a timer costs only a repair a later packet's ACK or the
+        receiver's NAK does not make first."""
+        span = max(now - self._init_sent_at, TIME_EPSILON)
+        floor = (self._init_chars + self._answer_chars) / span
+        timeout = self._rtt.timeout()
+        queued = 0
+        for seq in sorted(self._sender.outstanding):
+            pkt = self._sender.outstanding[seq]
+            queued += len(pkt.wire)
+            if not pkt.acked and pkt.deadline is not None:
+                self._sender.arm(pkt, now + timeout + queued / floor)
+        self._flight_drain = queued / floor
+
+    def _unwind_flight(self, flight: Flight) -> None:
+        """Our first flight was not taken: its bytes go back into the send
+        queue where they came from (behind early data still there), and
+        numbering starts again after the announcement's bound."""
+        s = self._sender
+        sent = s.next - 1
+        early = len(self._early or b"")
+        s.queue[early:early] = self._flight_bytes
+        self._flight_bytes.clear()
+        s.restart_at(flight.packets + 1)
+        self._counters["flight_refused"] += sent
+        self._mean_wire = float(self._start_length + 1)
 
     def _answer_init(self) -> None:
         self._control.append(
@@ -1382,6 +1644,7 @@ class Endpoint:
             and self._rtt.srtt is None
             and state is _ESTABLISHED
             and ptype != _T_INIT
+            and not self._in_flight_in(packet)
         ):
             # The first packet the connector sent after our first answer: the
             # round trip is at most this (the connector may have waited, or
@@ -1398,6 +1661,11 @@ class Endpoint:
             # (ESTABLISHED is CONNECTED: tested first, as a frozenset lookup
             # hashes the enum member in Python.)
             connected = self._state is _ESTABLISHED or self._state in CONNECTED
+            if connected and self._in_flight_in(packet):
+                self._flight_data_seen = True
+                self._counters["flight_received"] += 1
+            elif connected:
+                self._peer_data_seen = True
             if connected and (split := self._split_seq(packet)) is not None:
                 if split[1]:
                     # Data spaces the ACKs behind it by the peer's line.  An
@@ -1442,6 +1710,19 @@ class Endpoint:
                 self._on_latest_ack(packet, now)
         else:
             self._counters["ignored_packets"] += 1  # Unknown types are ignored, as Kermit does.
+
+    def _in_flight_in(self, packet: Packet) -> bool:
+        """``packet`` may belong to the first flight of the request we
+        answered (sent behind it, before our answer: no round trip), as
+        far as we can tell: data numbered within its bound, before any
+        beyond it arrived."""
+        flight = self._flight_in
+        return (
+            flight is not None
+            and not self._peer_data_seen
+            and packet.type in (_T_DATA, _T_EOF)
+            and packet.seq <= flight.packets
+        )
 
     def _long_offer(self) -> int | None:
         """The long window this side may offer: None when it is turned off, or
@@ -1670,6 +1951,8 @@ class Endpoint:
         """The rate in use or the path's base round trip moved: pacing, the
         timeout floor, the window bound and the receive buffer follow."""
         self._pacer.paced = self._rate.rate is not None
+        if self._rate.measured is not None:
+            self._flight_drain = 0.0  # (a measured rate times what is queued now)
         # The short UART queue only at the rate the user gave (see
         # Pacer.horizon), with a rate pair a round trip until one shows the
         # line no faster (_pair_verdict): an estimate still moving needs the
@@ -1723,7 +2006,6 @@ class Endpoint:
             self._tune_at, self._tune_taken = now, taken
 
     def _on_data(self, seq: int, data: bytes, eof: bool, now: float) -> None:
-        self._peer_data_seen = True
         if self._last_data_at is not None:
             # The peer's data packets' spacing, the largest recent one
             # (decayed per packet like the peer's length): see _next_probe_time.
@@ -2106,32 +2388,83 @@ class Endpoint:
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
-                capacity = self._carried(self._length.length)
-                short = not self._long_seq and self._send_check is _CRC16
-                for field, used in self._encoding.encode_fields(s.queue, capacity, batch):
-                    if short:
-                        # The encoder's field holds no MARK: no Packet to check it.
-                        wire = _crc16_packet(s.next % 64, _DATA_C, field)
-                    else:
-                        seq, head = self._seq_fields(s.next)
-                        wire = build_packet(
-                            Packet(seq=seq, type=PacketType.DATA, data=head + field),
-                            self._send_check,
-                        )
-                    del s.queue[:used]
-                    # Exposure counts first sends and resends, whose losses
-                    # show; an idle copy's or a doubled resend's would not.
-                    self._length.sent(len(wire))
-                    self._mean_wire += (len(wire) - self._mean_wire) / 8
-                    self._transmit(s.add(wire, used, eof=False), now, timeout, out)
+                self._send_new(0, self._carried(self._length.length), batch, now, timeout, out)
+            else:
+                self._send_eof_packet(now, timeout, out)
+        if s.has_new_data():
+            self._backlog_at = now  # the line, not the application, is the limit
+
+    def _send_new(
+        self,
+        start: int,
+        capacity: int,
+        batch: int,
+        now: float,
+        timeout: float,
+        out: list[bytes],
+        *,
+        keep: bool = False,
+    ) -> bytes:
+        """Cut up to ``batch`` new data packets of at most ``capacity`` data
+        characters from the send queue at offset ``start`` (past early data
+        still waiting for the answer, in a first flight) and send them;
+        with ``keep``, returns the bytes they took (else nothing)."""
+        s = self._sender
+        short = not self._long_seq and self._send_check is _CRC16
+        whole = start == 0 and not keep
+        # (A copy bounds the encoder's work: a character carries a byte at most.)
+        source = s.queue if whole else s.queue[start : start + batch * capacity]
+        taken = 0
+        for field, used in self._encoding.encode_fields(source, capacity, batch):
+            if short:
+                # The encoder's field holds no MARK: no Packet to check it.
+                wire = _crc16_packet(s.next % 64, _DATA_C, field)
             else:
                 seq, head = self._seq_fields(s.next)
                 wire = build_packet(
-                    Packet(seq=seq, type=PacketType.EOF, data=head), self._send_check
+                    Packet(seq=seq, type=PacketType.DATA, data=head + field),
+                    self._send_check,
                 )
-                self._transmit(s.add(wire, 0, eof=True), now, timeout, out)
-        if s.has_new_data():
-            self._backlog_at = now  # the line, not the application, is the limit
+            if whole:
+                del s.queue[:used]
+            else:
+                taken += used
+            # Exposure counts first sends and resends, whose losses
+            # show; an idle copy's or a doubled resend's would not.
+            self._length.sent(len(wire))
+            self._mean_wire += (len(wire) - self._mean_wire) / 8
+            self._transmit(s.add(wire, used, eof=False), now, timeout, out)
+        if whole:
+            return b""
+        took = bytes(s.queue[start : start + taken])
+        del s.queue[start : start + taken]
+        return took
+
+    def _send_eof_packet(self, now: float, timeout: float, out: list[bytes]) -> None:
+        seq, head = self._seq_fields(self._sender.next)
+        wire = build_packet(Packet(seq=seq, type=PacketType.EOF, data=head), self._send_check)
+        self._transmit(self._sender.add(wire, 0, eof=True), now, timeout, out)
+
+    def _release_flight(self, now: float, out: list[bytes]) -> None:
+        """CONNECTING with a first flight announced: data packets numbered
+        up to its bound go now, cut as the agreement we assumed says
+        (PROTOCOL.md 14), behind any early data still at the queue's head."""
+        s, flight = self._sender, self._flight
+        assert flight is not None
+        timeout = self._rtt.timeout()
+        early = len(self._early or b"")
+        capacity = self._carried(flight.length)
+        while s.next <= flight.packets and self._pacer.has_room(now):
+            sent = s.next
+            if len(s.queue) > early:
+                self._flight_bytes += self._send_new(
+                    early, capacity, 1, now, timeout, out, keep=True
+                )
+            elif s.eof_requested and not s.eof_sent and not early:
+                self._send_eof_packet(now, timeout, out)
+            else:
+                break
+            self._counters["flight_packets"] += s.next - sent
 
     def _release_copies(self, now: float, timeout: float, out: list[bytes]) -> None:
         """Fill an idle line with copies of unacknowledged packets, newest
@@ -2164,7 +2497,7 @@ class Endpoint:
             self._last_first = (pkt, now)
         else:
             self._last_first = None  # a resend between two breaks their pair
-        self._sender.arm(pkt, pkt.done_at + timeout)
+        self._sender.arm(pkt, pkt.done_at + timeout + self._flight_drain)
 
     # -- internals: timing --------------------------------------------------------------
 

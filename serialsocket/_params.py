@@ -41,6 +41,10 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
                  characters that follow, then ``n`` characters: the first
                  bytes of the stream, prefix-encoded as the classic
                  printable profile (``#``, ``&``, no repeat counts)
+ 27   XFLIGHT    only in an ``I`` with XLANES bit 4 (PROTOCOL.md 14): five
+                 chars: tochar(k), the most packets of the first flight;
+                 two chars (6 bits each) of its longest packet; two chars
+                 (6 bits each) of the request's 12-bit nonce
 ====  =========  ==========================================================
 
 MAXLX counts DATA+CHECK characters, as in C-Kermit; our lengths count MARK
@@ -75,18 +79,24 @@ __all__ = [
     "FEATURE_RADIX91",
     "FEATURE_XON_XOFF",
     "LANE_EARLY",
+    "LANE_FLIGHT",
     "LANE_LATEST",
     "LONG_SEQ_MODULUS",
+    "MAX_FLIGHT_LENGTH",
+    "MAX_FLIGHT_PACKETS",
     "MAX_LONG_WINDOW",
     "PROTOCOL_VERSION",
     "RESIDUAL_ERROR_TARGET",
     "DataCodec",
+    "Flight",
     "InitParameters",
     "Negotiated",
     "crc32_wanted",
     "decode18",
     "encode18",
+    "flight_format",
     "negotiate",
+    "self_agreement",
 ]
 
 PROTOCOL_VERSION = 1
@@ -127,6 +137,18 @@ LANE_EARLY = 2
 bytes of my stream follow in the XEARLY field.  In a listener's own
 parameters: I take early data.  In a ``Y``: your early data was delivered, all
 of it (nothing was delivered when the bit is clear)."""
+LANE_FLIGHT = 4
+"""XLANES bit, the first flight (PROTOCOL.md section 14).  In an ``I``: data
+packets follow it before any answer, cut as if the listener agreed to my
+offer (:func:`self_agreement`); the XFLIGHT field bounds them.  In a ``Y``:
+your first flight was taken: every packet of it is data of this connection
+(clear: none is, and your data starts again at sequence number k + 1).
+Nowhere else."""
+MAX_FLIGHT_PACKETS = 31
+"""The most packets a first flight may declare: within any window a telelink
+endpoint offers, and within half the short sequence space."""
+MAX_FLIGHT_LENGTH = 64 * 64 - 1
+"""The longest first-flight packet XFLIGHT can announce (12 bits)."""
 EARLY_INIT_LIMIT = 1024
 """The longest ``I`` a listener accepts whatever its own maximum packet length
 (MARK through CHECK): room for early data before any length is negotiated."""
@@ -220,6 +242,8 @@ class InitParameters:
             older telelink sends none, and reads past what it does not know).
         early: the early data an ``I`` carries (XEARLY, with
             :data:`LANE_EARLY`), or None.
+        flight: the first flight an ``I`` announces (XFLIGHT, with
+            :data:`LANE_FLIGHT`), or None.
     """
 
     max_packet_length: int
@@ -235,6 +259,7 @@ class InitParameters:
     features: int | None = None
     lanes: int | None = None
     early: bytes | None = None
+    flight: Flight | None = None
 
     @classmethod
     def mine(
@@ -311,6 +336,7 @@ class InitParameters:
             features=features,
             lanes=lanes,
             early=None,
+            flight=None,
             long_window=long_window if theirs.long_window is not None else None,
         )
 
@@ -328,6 +354,16 @@ class InitParameters:
         """The TIMEOUT field is at its largest value: the sender's initial
         timeout is that or longer (the field cannot say more)."""
         return (self.timeout_hint or 0.0) >= TIMEOUT_HINT_MAX
+
+    def with_flight(self, flight: Flight | None) -> InitParameters:
+        """These parameters as an ``I`` that announces ``flight`` (none: the
+        bit clear), or, with ``flight`` None, as an answer that says the
+        requester's first flight was not taken."""
+        if self.lanes is None:
+            return self
+        if flight is None:
+            return dataclasses.replace(self, lanes=self.lanes & ~LANE_FLIGHT, flight=None)
+        return dataclasses.replace(self, lanes=self.lanes | LANE_FLIGHT, flight=flight)
 
     def without_early(self) -> InitParameters:
         """These parameters with no early data and the bit clear: the answer
@@ -379,6 +415,8 @@ class InitParameters:
                         raise ValueError(f"early data encodes to {len(encoded)} characters")
                     fields += (tochar(len(encoded) >> 6), tochar(len(encoded) & 63))
                     fields += encoded
+                if self.lanes & LANE_FLIGHT and self.flight is not None:
+                    fields += self.flight.encode()
         return bytes(fields)
 
     @classmethod
@@ -439,6 +477,7 @@ class InitParameters:
         features = None
         lanes = None
         early = None
+        flight = None
         if j < len(data):
             sysid_len = unchar(data[j])
             sysid = data[j + 1 : j + 1 + sysid_len]
@@ -463,8 +502,14 @@ class InitParameters:
                         lanes = unchar(data[at_lanes])
                         if not 0 <= lanes <= 94:
                             raise bad("XLANES")
-                        if lanes & LANE_EARLY and at_lanes + 1 < len(data):
-                            early = _decode_early(data[at_lanes + 1 :], bad)
+                        rest = data[at_lanes + 1 :]
+                        if lanes & LANE_EARLY and rest:
+                            early, rest = _decode_early(rest, bad)
+                            if rest and not lanes & LANE_FLIGHT:
+                                raise bad("XEARLY")  # the count must match
+                        if lanes & LANE_FLIGHT and rest:
+                            # (Characters after it: a later version's fields.)
+                            flight = Flight.decode(rest, bad)
         return cls(
             max_packet_length=max(max_len, MIN_PACKET_LENGTH),
             window=window,
@@ -479,19 +524,68 @@ class InitParameters:
             features=features,
             lanes=lanes,
             early=early,
+            flight=flight,
         )
 
 
-def _decode_early(field: bytes, bad: Callable[[str], RemoteProtocolError]) -> bytes:
+def _decode_early(field: bytes, bad: Callable[[str], RemoteProtocolError]) -> tuple[bytes, bytes]:
     """The XEARLY field: two count characters, then exactly that many
-    characters of printable-profile encoding (the init's last field)."""
+    characters of printable-profile encoding; returns its bytes and what
+    follows it (XFLIGHT, or nothing)."""
     hi, lo = unchar(field[0]), unchar(field[1]) if len(field) > 1 else -1
-    if not (0 <= hi < 64 and 0 <= lo < 64) or len(field) != 2 + (hi << 6 | lo):
+    if not (0 <= hi < 64 and 0 <= lo < 64) or len(field) < 2 + (hi << 6 | lo):
         raise bad("XEARLY")
+    end = 2 + (hi << 6 | lo)
     try:
-        return EARLY_ENCODING.decode(field[2:])
+        return EARLY_ENCODING.decode(field[2:end]), field[end:]
     except RemoteProtocolError as exc:  # MalformedDataError: a dangling prefix
         raise bad("XEARLY") from exc
+
+
+@dataclass(frozen=True, slots=True)
+class Flight:
+    """A first flight's announcement (the XFLIGHT field, PROTOCOL.md 14).
+
+    Attributes:
+        packets: the most data packets (sequence numbers 1..packets) sent
+            before the answer, 1..:data:`MAX_FLIGHT_PACKETS`.
+        length: the longest of them, MARK through CHECK.
+        nonce: 12 bits that differ between two requests of one endpoint
+            (and, very likely, of a restarted one): a listener tells a
+            resent request from a restarted connector's by it.
+    """
+
+    packets: int
+    length: int
+    nonce: int
+
+    SIZE = 5
+    """Characters of the field."""
+
+    def encode(self) -> bytes:
+        """The five field characters."""
+        return bytes(
+            (
+                tochar(self.packets),
+                tochar(self.length >> 6 & 63),
+                tochar(self.length & 63),
+                tochar(self.nonce >> 6 & 63),
+                tochar(self.nonce & 63),
+            )
+        )
+
+    @classmethod
+    def decode(cls, field: bytes, bad: Callable[[str], RemoteProtocolError]) -> Flight:
+        """The field at the head of ``field``."""
+        c = [unchar(x) for x in field[: cls.SIZE]]
+        if len(c) != cls.SIZE or not all(0 <= x < 64 for x in c):
+            raise bad("XFLIGHT")
+        flight = cls(c[0], c[1] << 6 | c[2], c[3] << 6 | c[4])
+        if not 1 <= flight.packets <= MAX_FLIGHT_PACKETS or not (
+            MIN_PACKET_LENGTH <= flight.length <= min(MAX_PACKET_LENGTH, MAX_FLIGHT_LENGTH)
+        ):
+            raise bad("XFLIGHT")
+        return flight
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -604,3 +698,23 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
             common & FEATURE_EXPEDITED and (mine.lanes or 0) & (theirs.lanes or 0) & LANE_LATEST
         ),
     )
+
+
+def self_agreement(offer: InitParameters) -> Negotiated:
+    """What a listener configured as ``offer`` describes would agree with it:
+    what a first flight is cut by (PROTOCOL.md 14).  The same function of
+    the request on both sides.
+
+    Raises:
+        RemoteProtocolError: the offer cannot agree with itself (never for
+            an endpoint's own offer).
+    """
+    return negotiate(offer.answer(offer, offer.long_window), offer)
+
+
+def flight_format(agreed: Negotiated) -> tuple[object, ...]:
+    """What a data packet's bytes depend on: its block check, its data
+    encoding and whether long sequence numbers head its field.  A first
+    flight is taken only when the real agreement has the format the flight
+    was cut by (:func:`self_agreement`)."""
+    return (agreed.check, agreed.encoding, agreed.long_seq)

@@ -243,6 +243,16 @@ class RateEstimator:
         if base_rtt is not None:
             self.base_rtt = self.init_rtt = base_rtt
 
+    def answered(self, base_rtt: float | None, init_bytes: int) -> None:
+        """The init's answer came after :meth:`start` was called at the
+        init (a first flight went behind it, PROTOCOL.md 14, its packets
+        the first after the delivery point): ``base_rtt`` as in
+        :meth:`start`, and ``init_bytes`` the characters of the init's
+        copies (what :meth:`start` counts as the init exchange's)."""
+        self._init_bytes = init_bytes
+        if base_rtt is not None:
+            self.base_rtt = self.init_rtt = base_rtt
+
     def seed_base(self, upper_bound: float, *, trusted_later: bool = True) -> None:
         """An upper bound of the base round trip: a listener's, from its init
         answer to the connector's next packet, or a connector's whose init was

@@ -353,6 +353,31 @@ class Sender:
             self.schedule(seq)
         return cut
 
+    def restart_at(self, seq: int) -> None:
+        """Forget every packet sent (a first flight the peer did not take,
+        PROTOCOL.md 14): the next packet is ``seq``.  The caller puts their
+        bytes back in :attr:`queue` first; none of them counts as sent."""
+        self.outstanding.clear()
+        self.retransmit.clear()
+        self._queued.clear()
+        self._timers.clear()
+        self._sent_order.clear()
+        self.delivered.clear()
+        self._unacked = 0
+        self.bytes_in_flight = 0
+        self.eof_sent = False
+        self.base = self.next = self.peer_cum = seq
+        self._copy_top = self._copy_cursor = 0
+        self._copy_round = 1
+
+    def rearm_all(self, deadline: float) -> None:
+        """Every unacknowledged packet's timer fires no earlier than
+        ``deadline`` (a first flight's, armed before any round trip was
+        known, once the answer measures one)."""
+        for pkt in self.outstanding.values():
+            if not pkt.acked and pkt.deadline is not None and pkt.deadline < deadline:
+                self.arm(pkt, deadline)
+
     def has_retransmit(self) -> bool:
         """A packet waits to be sent again."""
         self._drop_stale_head()

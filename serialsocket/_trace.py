@@ -24,7 +24,7 @@ from ._encoding import PRINTABLE, Encoding
 from ._errors import MalformedDataError, RemoteProtocolError
 from ._expedited import URGENT
 from ._latest import LATEST
-from ._params import DataCodec, InitParameters, negotiate
+from ._params import DataCodec, InitParameters, Negotiated, negotiate, self_agreement
 from ._parser import PacketParser, PacketReceived
 from ._port import PortStatistics, port_statistics
 from ._wire import MAX_PACKET_LENGTH, PacketType
@@ -63,11 +63,19 @@ class _Direction:
             self.init = InitParameters.decode(data)
             other = self.other
             if other is None or other.init is None:
+                if self.init.flight is not None:
+                    # A first flight follows, cut as the request's agreement
+                    # with itself says (PROTOCOL.md 14).
+                    self._follow(self_agreement(self.init), [self])
                 return
             agreed = negotiate(self.init, other.init)
         except RemoteProtocolError:
             return
-        for d in (self, other):
+        self._follow(agreed, [self, other])
+
+    @staticmethod
+    def _follow(agreed: Negotiated, directions: list[_Direction]) -> None:
+        for d in directions:
             d.encoding = agreed.encoding
             d.parser.check = agreed.check
             d.head = 2 if agreed.long_seq else 0

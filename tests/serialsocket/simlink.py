@@ -151,3 +151,63 @@ def connected_pair(
     a.connect(0.0)
     link.run_until(lambda: a.state is State.ESTABLISHED and b.state is State.ESTABLISHED)
     return a, b, link
+
+
+class QueuedRun:
+    """``a`` queues ``data`` (what fits), connects to listening ``b`` at t = 0 on
+    a 2400 bit/s :class:`SimLink`, and queues the rest as room appears (early
+    data, PROTOCOL.md 13; a first flight, 14)."""
+
+    def __init__(
+        self,
+        data: bytes,
+        cfg_a: EndpointConfig = MOON_HINTS,
+        cfg_b: EndpointConfig = MOON_HINTS,
+        filters: list[Filter] | None = None,
+        *,
+        delay: float = 1.3,
+    ) -> None:
+        self.a, self.b = Endpoint(cfg_a), Endpoint(cfg_b)
+        self.link = SimLink(self.a, self.b, delay=delay, rate=2400, filters=filters)
+        self.b.listen()
+        self.data = data
+        self.queued = self.a.send(data, 0.0)
+        self.a.connect(0.0)
+
+    def step(self) -> bool:
+        if self.queued < len(self.data) and self.a.state is not State.FAILED:
+            self.queued += self.a.send(self.data[self.queued :], self.link.now)
+        return self.link.step()
+
+    def read_all(self, n: int | None = None) -> tuple[bytes, float | None]:
+        """Run until ``b`` has read ``n`` bytes (all of ``data``); the bytes and
+        when the first came.  Fails if either side fails or 900 s pass."""
+        n = len(self.data) if n is None else n
+        got = bytearray()
+        first = None
+        while len(got) < n:
+            assert self.step(), "the link went quiet"
+            chunk = self.b.read()
+            if chunk and first is None:
+                first = self.link.now
+            got += chunk
+            assert self.link.now < 900
+            assert self.b.state is not State.FAILED
+            assert self.a.state is not State.FAILED
+        return bytes(got), first
+
+
+def drop_nth(kind: bytes, which: set[int], direction: str) -> Filter:
+    """A filter dropping the packets of type ``kind`` numbered ``which`` (from
+    1) in ``direction``; for ``Y``, init answers only (a long data field)."""
+    seen = 0
+
+    def f(d: str, pkt: bytes, now: float) -> list[bytes]:
+        nonlocal seen
+        if d == direction and pkt[3:4] == kind and (kind != b"Y" or len(pkt) > 20):
+            seen += 1
+            if seen in which:
+                return []
+        return [pkt]
+
+    return f

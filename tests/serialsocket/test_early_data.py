@@ -17,33 +17,9 @@ from serialsocket import Endpoint, EndpointConfig, RemoteProtocolError, State
 from serialsocket._params import EARLY_INIT_LIMIT, LANE_EARLY, InitParameters
 from serialsocket.packets import BlockCheck
 
-from .simlink import MOON_HINTS, SimLink
+from .simlink import MOON_HINTS, QueuedRun, SimLink, drop_nth
 
 DELAY = 1.3
-
-
-class _Run:
-    """``a`` queues ``data`` (what fits), connects to listening ``b`` at t = 0,
-    and queues the rest as room appears."""
-
-    def __init__(
-        self,
-        data: bytes,
-        cfg_a: EndpointConfig = MOON_HINTS,
-        cfg_b: EndpointConfig = MOON_HINTS,
-        filters: list | None = None,  # type: ignore[type-arg]
-    ) -> None:
-        self.a, self.b = Endpoint(cfg_a), Endpoint(cfg_b)
-        self.link = SimLink(self.a, self.b, delay=DELAY, rate=2400, filters=filters)
-        self.b.listen()
-        self.data = data
-        self.queued = self.a.send(data, 0.0)
-        self.a.connect(0.0)
-
-    def step(self) -> bool:
-        if self.queued < len(self.data):
-            self.queued += self.a.send(self.data[self.queued :], self.link.now)
-        return self.link.step()
 
 
 def _start(
@@ -51,41 +27,17 @@ def _start(
     cfg_a: EndpointConfig = MOON_HINTS,
     cfg_b: EndpointConfig = MOON_HINTS,
     filters: list | None = None,  # type: ignore[type-arg]
-) -> tuple[Endpoint, Endpoint, _Run]:
-    run = _Run(data, cfg_a, cfg_b, filters)
+) -> tuple[Endpoint, Endpoint, QueuedRun]:
+    run = QueuedRun(data, cfg_a, cfg_b, filters, delay=DELAY)
     return run.a, run.b, run
 
 
-def _read_all(a: Endpoint, b: Endpoint, run: _Run, n: int) -> tuple[bytes, float | None]:
+def _read_all(a: Endpoint, b: Endpoint, run: QueuedRun, n: int) -> tuple[bytes, float | None]:
     """Run until ``b`` has read ``n`` bytes; the bytes and when the first came."""
-    got = bytearray()
-    first = None
-    link = run.link
-    while len(got) < n:
-        assert run.step(), "the link went quiet"
-        chunk = b.read()
-        if chunk and first is None:
-            first = link.now
-        got += chunk
-        assert link.now < 600
-        assert b.state is not State.FAILED
-        assert a.state is not State.FAILED
-    return bytes(got), first
+    return run.read_all(n)
 
 
-def _drop(kind: bytes, which: set[int], direction: str):  # type: ignore[no-untyped-def]
-    seen = 0
-
-    def f(d: str, pkt: bytes, now: float) -> list[bytes]:
-        nonlocal seen
-        # An init answer is a Y with a long data field; data ACKs are short.
-        if d == direction and pkt[3:4] == kind and (kind != b"Y" or len(pkt) > 20):
-            seen += 1
-            if seen in which:
-                return []
-        return [pkt]
-
-    return f
+_drop = drop_nth
 
 
 def test_the_first_bytes_arrive_one_way_after_connecting() -> None:
