@@ -186,7 +186,11 @@ class _Tally:
     def record(self, outcome: str) -> dict[str, object]:
         """The counters for ``--stats`` / ``--json``: payload each way, the line, repairs."""
         record: dict[str, object] = {"outcome": outcome}
-        if self.sock is None or self.connected_at is None:
+        if (
+            self.sock is None
+            or self.connected_at is None
+            or self.sock.endpoint.parameters is None  # a deferred request unanswered
+        ):
             return record | {"connected": False}
         sock = self.sock.statistics()
         st = sock.link
@@ -275,6 +279,7 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
     return EndpointConfig(
         encoding=_PROFILES[args.profile],
         dense=args.dense,  # a byte stream of any content: dense unless told otherwise
+        first_flight=True,  # stdin's first bytes leave behind the request (PROTOCOL.md 14)
         window=args.window,
         max_packet_length=args.max_len,
         max_packet_time=args.max_packet_time,
@@ -313,7 +318,12 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
         if listening:
             sock = await accept(stream, cfg, nursery=nursery)
         else:
-            sock = await connect(stream, cfg, nursery=nursery)
+            # Deferred: the request goes with stdin's first bytes queued, so
+            # they leave right behind it as a first flight instead of after
+            # the handshake's round trip (PROTOCOL.md 14); a failed request
+            # surfaces at the next read or write, caused by what connect()
+            # raises (reported as before: _netcat).
+            sock = await connect(stream, cfg, nursery=nursery, defer=True)
         tally.sock = sock
         tally.connected_at = trio.current_time()
         if args.show_progress:
@@ -398,6 +408,9 @@ def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally)
         return 1
     except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
         cause = exc.__cause__
+        if isinstance(cause, (TimeoutError, ConnectionRefusedError)):
+            _fail(name, str(cause), tally)  # the deferred request failed
+            return 1
         reason = cause if isinstance(cause, LinkBroken) else exc
         _fail(name, f"the link failed: {reason}", tally)
         return 1
@@ -413,5 +426,6 @@ def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally)
 def _fail(name: str, what: str, tally: _Tally) -> None:
     """What ended the run and, once connected, how far each direction got."""
     print(f"serialsocket {name}: {what}", file=sys.stderr)
-    if tally.sock is not None:
+    # (A deferred request never answered connected nothing: no report.)
+    if tally.sock is not None and tally.sock.endpoint.parameters is not None:
         print(f"serialsocket {name}: {tally.report()}", file=sys.stderr)

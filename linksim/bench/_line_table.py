@@ -229,14 +229,15 @@ def netcat_config(row: TransferRow, *, hints: bool, dense: bool = True) -> Endpo
     """The configuration ``serialsocket listen``/``connect`` builds for ``row``
     on a relay pty: the netcat's defaults (window, packet length derived from
     the hints), its profile as the pty resolves it (:data:`PROFILES`), the
-    dense encodings offered unless ``dense`` is False (``--no-dense``), and
-    with ``hints`` the line's rate and delay."""
+    dense encodings offered unless ``dense`` is False (``--no-dense``), a
+    first flight sent, and with ``hints`` the line's rate and delay."""
     return EndpointConfig(
         encoding=PROFILES[row.profile],
         dense=dense,
         one_way_delay=row.delay if hints else 0.0,
         line_rate=float(row.rate) if hints else None,
         max_packet_time=None,  # the netcat's default: no cap for a byte stream
+        first_flight=True,  # as the netcat sends it
     )
 
 

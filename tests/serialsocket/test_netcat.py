@@ -102,10 +102,13 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     trace = client.stderr.decode()
     # The connect request (--window 8: no long-sequence offer; XCAPAS offers the
     # dense encodings, PROTOCOL.md section 10) and the escape code on this 8N1 pty.
-    assert "tx I seq=0 len=35" in trace
+    # Five characters more: XFLIGHT, the first flight's announcement (PROTOCOL.md 14).
+    assert "tx I seq=0 len=40" in trace
     assert "#Y5" in trace  # QBIN Y: --profile auto took the 8-bit profile from the port
     assert "rx Y seq=0" in trace  # its answer
-    assert "tx D seq=1 len=128" in trace
+    # The first flight: twice the starting length, on the line before the answer.
+    assert trace.index("tx D seq=1 len=256") < trace.index("rx Y seq=0")
+    assert "undecodable" not in trace
     # --json: the counters at the end, on stderr (stdout is the data).
     record = json.loads(trace.splitlines()[-1])
     assert record["outcome"] == "delivered"
