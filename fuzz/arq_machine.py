@@ -15,8 +15,11 @@ or more than its drawn ``early_data`` bound): its init carries the first of
 them as early data (PROTOCOL.md section 13), which B delivers on accepting
 when its own configuration takes early data (``early_data`` not 0, and the
 XLANES field the expedited lane brings); otherwise, and for whatever did not
-fit, they go as ordinary data.  The line rules below drop, duplicate, delay and
-damage the init like any other packet, so it is resent and arrives in copies.
+fit, they go as ordinary data.  When more is queued than the init carries and
+A's configuration says so, those bytes go instead as a first flight of data
+packets right behind the init (section 14), which B takes or skips whole.  The
+line rules below drop, duplicate, delay and damage the init like any other
+packet, so it is resent and arrives in copies.
 
 Hypothesis then interleaves application calls, time, and impairments:
 
@@ -380,6 +383,10 @@ def endpoint_configs(
         # (expedited) and early_data not 0, taken by a listener likewise; any
         # other pair sends the bytes as ordinary data.
         early_data=draw(_EARLY_DATA),
+        # The first flight (section 14): sent by a connector with more queued
+        # than its init carries, taken by a listener that can read it.
+        first_flight=draw(st.sampled_from([True, True, False])),
+        takes_first_flight=draw(st.sampled_from([True, True, True, False])),
         xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
         line_rate=line_rate,
@@ -917,10 +924,16 @@ class ARQMachine(RuleBasedStateMachine):
         assert sb.early_sent == sb.early_delivered == sa.early_received == 0, (sa, sb)
         bound = min(self.early_queued, a.config.early_data)
         assert sa.early_sent <= bound, (sa.early_sent, bound)
-        if a.state is not State.IDLE and bound and a.config.init_lanes() is not None:
-            # A connector with XLANES and queued bytes puts some in its init.
+        if (
+            a.state is not State.IDLE
+            and bound
+            and a.config.init_lanes() is not None
+            and not sa.flight_announced
+        ):
+            # A connector with XLANES and queued bytes puts some in its init
+            # (unless they go as a first flight behind it: section 14).
             assert sa.early_sent > 0, (sa, bound)
-        elif a.config.init_lanes() is None:
+        if sa.flight_announced or a.config.init_lanes() is None:
             assert sa.early_sent == 0, sa
         # All or nothing, once: a second delivery would double early_received.
         assert sa.early_delivered in (0, sa.early_sent), sa
@@ -938,6 +951,22 @@ class ARQMachine(RuleBasedStateMachine):
         if a.state not in (State.IDLE, State.CONNECTING):
             # A read the answer: it says delivered exactly when B delivered.
             assert sa.early_delivered == sb.early_received, (sa, sb)
+
+    @invariant()
+    def first_flight_is_all_or_nothing(self) -> None:
+        """A first flight (PROTOCOL.md 14) is taken whole or not at all, within
+        its announcement; which bytes arrive, once and in order, is the
+        other invariants' business."""
+        a, b = self.ep["a"], self.ep["b"]
+        sa, sb = a.statistics(), b.statistics()
+        assert sb.flight_announced == sb.flight_packets == 0, sb  # only a connector flies
+        assert sa.flight_packets <= sa.flight_announced, sa
+        assert sa.flight_refused in (0, sa.flight_packets), sa
+        if sa.flight_announced and not (a.config.first_flight and a.config.init_lanes()):
+            raise AssertionError(f"a flight announced against the configuration: {sa}")
+        if sa.flight_refused and a.state is not State.CONNECTING:
+            # Not taken: its numbers were skipped, on both sides alike.
+            assert sa.send_next > sa.flight_announced, sa
 
     @invariant()
     def connection_stays_alive(self) -> None:
