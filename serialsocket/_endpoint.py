@@ -440,9 +440,15 @@ class Endpoint:
     announcement) arrived; :attr:`_peer_data_seen` is for data beyond it."""
     _accepted_init: bytes | None
     """The data field of the request we answered (a resend repeats it)."""
-    _flight_drain: float
-    """Seconds a packet sent behind our first flight may wait for it to
-    leave, while the line's rate is unknown (:meth:`_time_flight`)."""
+    _flight_floor: float
+    """While the line's rate is unmeasured after our first flight: the
+    slowest rate, characters a second, the init exchange allows (0: none;
+    :meth:`_time_flight`)."""
+    _flight_ahead: int
+    """Characters of a first flight not taken that still hold the line
+    ahead of what is sent after it (while :attr:`_flight_floor`)."""
+    _flight_wire: int
+    """Characters of our first flight's packets handed to the line."""
     _init_chars: int
     """Characters of our init on the line."""
     _answer_chars: int
@@ -1160,7 +1166,9 @@ class Endpoint:
         self._flight_in = None
         self._flight_taken = False
         self._flight_data_seen = False
-        self._flight_drain = 0.0
+        self._flight_floor = 0.0
+        self._flight_ahead = 0
+        self._flight_wire = 0
         self._init_chars = 0
         self._answer_chars = 0
         self._accepted_init = None
@@ -1508,8 +1516,8 @@ class Endpoint:
             # 0.02 s "round trip" on a 1.3 s line (an ACK timed from a pacer
             # model running late) made the link dead after 2 s of silence.
             self._rate.seed_base(now - self._first_init_at, trusted_later=False)
-        if taken:
-            self._time_flight(now)
+        if self._flight_wire:
+            self._time_flight(now, taken=taken)
         self._flight_bytes.clear()
         if answer:
             self._answer_sent_at = now
@@ -1543,28 +1551,41 @@ class Endpoint:
                 self._length.length = agreed.send_max_length
         self._length_changed()
 
-    def _time_flight(self, now: float) -> None:
-        """Our first flight was taken: time its packets, armed before any
-        round trip was known.  With the line's rate unknown they wait in
-        the UART's queue for as long as it takes (an unpaced sender hands
-        them at once), so each one's timer allows its place in that queue
-        at the slowest rate the init exchange allows: its two packets
-        crossed in one round trip.  Packets sent behind the flight before
-        a rate is measured wait behind all of it (:attr:`_flight_drain`).
-        Without this, 3 packets of 384 characters at 2400 bit/s timed out
-        while still queued, and the resends joined the queue: a storm.
-        Too long a timer costs only a repair a later packet's ACK or the
-        receiver's NAK does not make first."""
-        span = max(now - self._init_sent_at, TIME_EPSILON)
-        floor = (self._init_chars + self._answer_chars) / span
-        timeout = self._rtt.timeout()
-        queued = 0
-        for seq in sorted(self._sender.outstanding):
-            pkt = self._sender.outstanding[seq]
-            queued += len(pkt.wire)
-            if not pkt.acked and pkt.deadline is not None:
-                self._sender.arm(pkt, now + timeout + queued / floor)
-        self._flight_drain = queued / floor
+    def _time_flight(self, now: float, *, taken: bool) -> None:
+        """Our first flight is out: with the line's rate unknown its packets
+        wait in the UART's queue for as long as the line takes (an unpaced
+        sender hands them at once), taken or not.  Until a rate is measured,
+        every timer allows the slowest rate the init exchange permits (its
+        packets crossed in the time since the first init): a flight packet's
+        its place in the queue, and a packet sent after the answer all that
+        is unacknowledged ahead of it, and the flight if it was not taken
+        (:meth:`_queue_allowance`).  Without this, 3 packets of 384
+        characters at 2400 bit/s timed out while still queued, the resends
+        joined the queue, and no round trip or rate pair was ever measured:
+        a storm (153 timeouts in an 8 KiB transfer behind a flight not
+        taken).  Too long a timer costs only a repair a later packet's ACK
+        or the receiver's NAK does not make first."""
+        span = max(now - self._first_init_at, TIME_EPSILON)
+        self._flight_floor = (self._init_chars + self._answer_chars) / span
+        self._flight_ahead = 0 if taken else self._flight_wire
+        if taken:
+            timeout = self._rtt.timeout()
+            queued = 0
+            for seq in sorted(self._sender.outstanding):
+                pkt = self._sender.outstanding[seq]
+                queued += len(pkt.wire)
+                if not pkt.acked and pkt.deadline is not None:
+                    self._sender.arm(pkt, now + timeout + queued / self._flight_floor)
+
+    def _queue_allowance(self) -> float:
+        """Seconds a packet handed now may wait behind what is ahead of it
+        in the UART, while a first flight's queue is unmeasured (else 0)."""
+        if not self._flight_floor:
+            return 0.0
+        ahead = self._flight_ahead + sum(
+            len(p.wire) for p in self._sender.outstanding.values() if not p.acked
+        )
+        return ahead / self._flight_floor
 
     def _unwind_flight(self, flight: Flight) -> None:
         """Our first flight was not taken: its bytes go back into the send
@@ -1576,6 +1597,12 @@ class Endpoint:
         s.queue[early:early] = self._flight_bytes
         self._flight_bytes.clear()
         s.restart_at(flight.packets + 1)
+        # A rate pair among them would never be answered, and no other
+        # pair would go (_pair_due): the rate stayed unmeasured, and at an
+        # unknown rate the packets sent after timed out in a storm.
+        self._pair = None
+        self._last_first = None
+        self._pair_lead_acked = None
         self._counters["flight_refused"] += sent
         self._mean_wire = float(self._start_length + 1)
 
@@ -1952,7 +1979,7 @@ class Endpoint:
         timeout floor, the window bound and the receive buffer follow."""
         self._pacer.paced = self._rate.rate is not None
         if self._rate.measured is not None:
-            self._flight_drain = 0.0  # (a measured rate times what is queued now)
+            self._flight_floor = 0.0  # (a measured rate times what is queued now)
         # The short UART queue only at the rate the user gave (see
         # Pacer.horizon), with a rate pair a round trip until one shows the
         # line no faster (_pair_verdict): an estimate still moving needs the
@@ -2455,7 +2482,7 @@ class Endpoint:
         early = len(self._early or b"")
         capacity = self._carried(flight.length)
         while s.next <= flight.packets and self._pacer.has_room(now):
-            sent = s.next
+            sent, written = s.next, len(out)
             if len(s.queue) > early:
                 self._flight_bytes += self._send_new(
                     early, capacity, 1, now, timeout, out, keep=True
@@ -2465,6 +2492,7 @@ class Endpoint:
             else:
                 break
             self._counters["flight_packets"] += s.next - sent
+            self._flight_wire += sum(len(w) for w in out[written:])
 
     def _release_copies(self, now: float, timeout: float, out: list[bytes]) -> None:
         """Fill an idle line with copies of unacknowledged packets, newest
@@ -2497,7 +2525,7 @@ class Endpoint:
             self._last_first = (pkt, now)
         else:
             self._last_first = None  # a resend between two breaks their pair
-        self._sender.arm(pkt, pkt.done_at + timeout + self._flight_drain)
+        self._sender.arm(pkt, pkt.done_at + timeout + self._queue_allowance())
 
     # -- internals: timing --------------------------------------------------------------
 

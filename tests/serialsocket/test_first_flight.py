@@ -198,6 +198,18 @@ def test_a_flight_queued_at_an_unknown_rate_does_not_time_out_while_waiting() ->
     assert (sa.timeouts, sa.retransmissions) == (0, 0)
 
 
+def test_packets_behind_a_flight_not_taken_do_not_time_out_while_it_drains() -> None:
+    # Not taken, the flight's packets still hold the line ahead of what is
+    # sent after the answer; at an unknown rate that must be allowed for.
+    fixed = EndpointConfig(max_packet_length=384, first_flight=True)
+    grounded = dataclasses.replace(fixed, takes_first_flight=False)
+    run = _Run(random.Random(3).randbytes(8192), fixed, grounded, delay=0.0)
+    run.done()
+    sa = run.a.statistics()
+    assert sa.flight_refused == sa.flight_packets > 0
+    assert sa.timeouts == 0
+
+
 @pytest.mark.parametrize(("rate", "size"), [(300, 6000), (1200, 20000)])
 def test_a_rate_hint_ten_times_high_does_not_storm_behind_a_flight(rate: int, size: int) -> None:
     # Told ten times the line: the flight leaves paced at the hint.  The rate
