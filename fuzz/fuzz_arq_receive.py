@@ -8,12 +8,16 @@ due timers, application reads and writes on both sides, and honest exchanges
 of what each side queued.
 
 Each side's configuration comes first: a flag byte (bit 1: long sequence
-numbers; 0x20: offer the dense encodings; 0x40: the line uses XON/XOFF;
-0x80: ask for CRC-32 -- PROTOCOL.md sections 9 and 10), the window unless
+numbers; 0x08: take no first flight; 0x10: send one, with bytes from the
+input queued before connecting; 0x20: offer the dense encodings; 0x40: the
+line uses XON/XOFF; 0x80: ask for CRC-32 -- PROTOCOL.md sections 9, 10 and
+14), the window unless
 long, a 16-bit packet length (0xF000 and above: measured, PROTOCOL.md 4.7)
 and the line (even: printable, odd: 8-bit).  Two dense sides agree on the
 escape code (8-bit; with XON/XOFF escaped if either declares it) or the
-radix-91 packing (printable), and on CRC-32 if either asks; forged packets
+radix-91 packing (printable), and on CRC-32 if either asks.  Op 9 hands a
+fresh listener a request whose data field is the input's (what decodes is
+answered, the rest refused: never an exception).  Forged packets
 are then built with the agreed check, and op 1 encodes a ``D`` packet's data
 with the agreed encoding (after the two high sequence characters, from the
 input, when long sequence numbers are agreed).  Properties (any violation
@@ -52,6 +56,8 @@ _TIMER_SPIN_LIMIT = 64
 """Consecutive timer firings at one instant before it counts as a spin."""
 
 
+_NO_FLIGHT = 0x08
+_FLIGHT = 0x10
 _DENSE = 0x20
 _XON_XOFF = 0x40
 _CRC32 = 0x80
@@ -73,6 +79,8 @@ def _config(r: Reader) -> EndpointConfig:
         dense=bool(flags & _DENSE),
         xon_xoff=bool(flags & _XON_XOFF),
         check=BlockCheck.CRC32 if flags & _CRC32 else BlockCheck.CRC16,
+        first_flight=bool(flags & _FLIGHT),
+        takes_first_flight=not flags & _NO_FLIGHT,
         one_way_delay=60.0 if long else 1.0,
         line_rate=9600.0 if long else None,
         receive_buffer=2 * 9031,
@@ -113,12 +121,14 @@ def one_input(data: bytes) -> None:
     r = Reader(data)
     a = Endpoint(_config(r))
     b = Endpoint(_config(r))
+    if a.config.first_flight:
+        a.send(r.take(r.u16() % 4096), 0.0)  # more than the init carries: a flight
     now = _connect(a, b)
     agreed = b.parameters
     check = agreed.check if agreed is not None else BlockCheck.CRC16
     long_seq = agreed is not None and agreed.long_seq
     while r.remaining:
-        op = r.byte() % 9
+        op = r.byte() % 10
         if op in (0, 1):  # a well-formed packet of any type, seq and (encoded or not) data
             ptype = _TYPES[r.byte() % len(_TYPES)]
             seq = r.byte() % 64
@@ -148,6 +158,13 @@ def one_input(data: bytes) -> None:
         elif op == 7:  # an honest exchange
             b.receive_data(_fire(a, now), now)
             a.receive_data(_fire(b, now), now)
+        elif op == 9:  # any request to a fresh listener (XEARLY, XFLIGHT, ...)
+            c = Endpoint(b.config)
+            c.listen()
+            field = r.take(r.byte() + r.byte()).replace(b"\x01", b"#")
+            c.receive_data(build_packet(Packet(seq=0, type="I", data=field), BlockCheck.CRC16), now)
+            c.events()
+            _fire(c, now)
         else:
             verb = r.byte() % 4
             try:
