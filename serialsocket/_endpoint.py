@@ -447,6 +447,9 @@ class Endpoint:
     _flight_ahead: int
     """Characters of a first flight not taken that still hold the line
     ahead of what is sent after it (while :attr:`_flight_floor`)."""
+    _flight_past: int
+    """The first sequence number sent after the answer: once it is
+    acknowledged the flight's queue has drained (:attr:`_flight_floor` 0)."""
     _flight_wire: int
     """Characters of our first flight's packets handed to the line."""
     _init_chars: int
@@ -1168,6 +1171,7 @@ class Endpoint:
         self._flight_data_seen = False
         self._flight_floor = 0.0
         self._flight_ahead = 0
+        self._flight_past = 0
         self._flight_wire = 0
         self._init_chars = 0
         self._answer_chars = 0
@@ -1568,6 +1572,7 @@ class Endpoint:
         span = max(now - self._first_init_at, TIME_EPSILON)
         self._flight_floor = (self._init_chars + self._answer_chars) / span
         self._flight_ahead = 0 if taken else self._flight_wire
+        self._flight_past = self._sender.next
         if taken:
             timeout = self._rtt.timeout()
             queued = 0
@@ -1798,6 +1803,10 @@ class Endpoint:
         fast = self._sender.fast_retransmit_count
         acked = self._sender.packets_acked
         self._sender.on_ack(seq, cum, window, now)
+        if self._flight_floor and self._sender.base > self._flight_past:
+            # The first packet sent after the answer is through: so is the
+            # flight's queue, which its timers had to allow for.
+            self._flight_floor = 0.0
         self._take_samples(now)
         if self._sender.packets_acked > acked:
             self._rtt.on_progress()
