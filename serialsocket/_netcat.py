@@ -408,8 +408,12 @@ def _netcat(args: argparse.Namespace, listening: bool, name: str, tally: _Tally)
         return 1
     except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
         cause = exc.__cause__
-        if isinstance(cause, (TimeoutError, ConnectionRefusedError)):
-            _fail(name, str(cause), tally)  # the deferred request failed
+        sock = tally.sock
+        if isinstance(cause, (TimeoutError, ConnectionRefusedError)) or (
+            sock is not None and sock.endpoint.parameters is None
+        ):
+            # The deferred request failed: said as connect() says it.
+            _fail(name, str(cause or exc), tally)
             return 1
         reason = cause if isinstance(cause, LinkBroken) else exc
         _fail(name, f"the link failed: {reason}", tally)

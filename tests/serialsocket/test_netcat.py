@@ -127,6 +127,26 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     assert f"stdout_bytes_written {len(upload)}" in stats
 
 
+def test_an_unanswered_request_is_reported_as_connect_reports_it(
+    relay: tuple[str, str],
+) -> None:
+    # The netcat connects on its first write (a deferred request, so its
+    # first bytes fly behind it): the request's failure reaches a read or a
+    # write, and is still said as a plain connect says it, with no transfer
+    # report (nothing was connected).
+    a, _ = relay
+    done = subprocess.run(
+        cli("connect", a, "--connect-timeout", "1", "--json"),
+        input=b"hello",
+        capture_output=True,
+        timeout=GUARD,
+    )
+    assert done.returncode == 1
+    lines = done.stderr.decode().splitlines()
+    assert lines[-2].startswith("serialsocket connect: no answer to connect within 1.0 s: ")
+    assert json.loads(lines[-1]) == {"outcome": "failed", "connected": False}
+
+
 def test_errors_are_reported_with_exit_status() -> None:
     missing = subprocess.run(
         cli("connect", "/dev/no-such-tty-telelink"), capture_output=True, timeout=GUARD
