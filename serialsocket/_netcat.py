@@ -215,6 +215,10 @@ class _Tally:
             "fast_retransmits": st.fast_retransmits,
             "idle_copies": st.idle_copies,
             "doubled_resends": st.doubled_resends,
+            # The first flight (PROTOCOL.md 14): packets sent before the
+            # answer, and of those the listener did not take.
+            "flight_packets": st.flight_packets,
+            "flight_refused": st.flight_refused,
             "naks_sent": st.naks_sent,
             "check_failures": st.check_failures,
             "garbage_bytes": st.garbage_bytes,

@@ -120,6 +120,9 @@ def test_files_both_ways_byte_exact_and_clean_exit(
     # A clean line: nothing is resent.  (Idle copies may go: once the pair
     # measures this pty's rate, its 2 ms round trip is many packet times.)
     assert record["doubled_resends"] == 0
+    # The first flight went, and the listener (the same profile) took it.
+    assert record["flight_packets"] > 0
+    assert record["flight_refused"] == 0
     assert record["idle_copies"] >= 0
     # --stats: the same in words.
     stats = server_err.decode().splitlines()[-1]
