@@ -990,7 +990,7 @@ class Endpoint:
         """
         if self._state is State.CONNECTING and self._flight is not None:
             s, flight = self._sender, self._flight
-            if s.next <= flight.packets and len(s.queue) > len(self._early or b""):
+            if s.next <= flight.packets and s.queue:
                 return self._pacer.wake()
             return None
         if self._state is not State.ESTABLISHED:
@@ -1238,12 +1238,12 @@ class Endpoint:
         (PROTOCOL.md 14), and the sending side set up to cut it.
 
         Only with more bytes queued than early data takes, the XLANES field
-        going out and ``first_flight`` on; then no early data goes.  Its packets are cut
-        as the agreement of our own offer with itself says
-        (:func:`self_agreement`); their number covers
-        :data:`FLIGHT_SECONDS` of line at the rate hint (else at
-        :data:`FIRST_FLIGHT_RATE`), or the round trip when the delay is
-        hinted and that is longer."""
+        going out and ``first_flight`` on; then no early data goes.  Its
+        packets are cut as the agreement of our own offer with itself says
+        (:func:`self_agreement`); together they take at most what
+        :data:`FIRST_FLIGHT_RATE` carries in :data:`FLIGHT_SECONDS`, and
+        on a slower hinted line that line's second, or its round trip if
+        longer (within the same bound)."""
         cfg = self.config
         if not cfg.first_flight or self._mine.lanes is None or not self._sender.queue:
             return None
@@ -1380,8 +1380,8 @@ class Endpoint:
                 self._answer_with = mine.without_early()
             self._flight_in = theirs.flight
             self._flight_taken = self._takes_flight(st, mine, theirs, agreed, early_taken)
-            self._answer_with = self._answer_with.with_flight(None)
             if self._flight_taken and self._answer_with.lanes is not None:
+                # (Clear otherwise: our own lanes never carry the bit.)
                 self._answer_with = replace(
                     self._answer_with, lanes=self._answer_with.lanes | LANE_FLIGHT
                 )
@@ -1451,7 +1451,7 @@ class Endpoint:
             self._finish_abort("Bad init answer: first flight taken", by_peer=False, send=True)
             return
         if self._flight is not None and not taken:
-            self._unwind_flight(self._flight)  # (before the early bytes leave the queue)
+            self._unwind_flight(self._flight)
         if self._early and (theirs.lanes or 0) & LANE_EARLY:
             # The listener delivered our early data: it is not sent again.
             del self._sender.queue[: len(self._early)]
@@ -1593,13 +1593,12 @@ class Endpoint:
         return ahead / self._flight_floor
 
     def _unwind_flight(self, flight: Flight) -> None:
-        """Our first flight was not taken: its bytes go back into the send
-        queue where they came from (behind early data still there), and
-        numbering starts again after the announcement's bound."""
+        """Our first flight was not taken: its bytes go back to the head of
+        the send queue, and numbering starts again after the announcement's
+        bound."""
         s = self._sender
         sent = s.next - 1
-        early = len(self._early or b"")
-        s.queue[early:early] = self._flight_bytes
+        s.queue[:0] = self._flight_bytes
         self._flight_bytes.clear()
         s.restart_at(flight.packets + 1)
         # A rate pair among them would never be answered, and no other
@@ -2424,7 +2423,7 @@ class Endpoint:
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
-                self._send_new(0, self._carried(self._length.length), batch, now, timeout, out)
+                self._send_new(self._carried(self._length.length), batch, now, timeout, out)
             else:
                 self._send_eof_packet(now, timeout, out)
         if s.has_new_data():
@@ -2432,7 +2431,6 @@ class Endpoint:
 
     def _send_new(
         self,
-        start: int,
         capacity: int,
         batch: int,
         now: float,
@@ -2442,14 +2440,14 @@ class Endpoint:
         keep: bool = False,
     ) -> bytes:
         """Cut up to ``batch`` new data packets of at most ``capacity`` data
-        characters from the send queue at offset ``start`` (past early data
-        still waiting for the answer, in a first flight) and send them;
-        with ``keep``, returns the bytes they took (else nothing)."""
+        characters from the head of the send queue and send them; with
+        ``keep`` (a first flight's, which may be put back), returns the
+        bytes they took, else nothing."""
         s = self._sender
         short = not self._long_seq and self._send_check is _CRC16
-        whole = start == 0 and not keep
-        # (A copy bounds the encoder's work: a character carries a byte at most.)
-        source = s.queue if whole else s.queue[start : start + batch * capacity]
+        # (A copy bounds the encoder's work: but for repeat counts, a
+        # character carries a byte at most.)
+        source = s.queue[: batch * capacity] if keep else s.queue
         taken = 0
         for field, used in self._encoding.encode_fields(source, capacity, batch):
             if short:
@@ -2461,19 +2459,19 @@ class Endpoint:
                     Packet(seq=seq, type=PacketType.DATA, data=head + field),
                     self._send_check,
                 )
-            if whole:
-                del s.queue[:used]
-            else:
+            if keep:
                 taken += used
+            else:
+                del s.queue[:used]
             # Exposure counts first sends and resends, whose losses
             # show; an idle copy's or a doubled resend's would not.
             self._length.sent(len(wire))
             self._mean_wire += (len(wire) - self._mean_wire) / 8
             self._transmit(s.add(wire, used, eof=False), now, timeout, out)
-        if whole:
+        if not keep:
             return b""
-        took = bytes(s.queue[start : start + taken])
-        del s.queue[start : start + taken]
+        took = bytes(s.queue[:taken])
+        del s.queue[:taken]
         return took
 
     def _send_eof_packet(self, now: float, timeout: float, out: list[bytes]) -> None:
@@ -2484,19 +2482,17 @@ class Endpoint:
     def _release_flight(self, now: float, out: list[bytes]) -> None:
         """CONNECTING with a first flight announced: data packets numbered
         up to its bound go now, cut as the agreement we assumed says
-        (PROTOCOL.md 14), behind any early data still at the queue's head."""
+        (PROTOCOL.md 14).  (An init that announces a flight carries no early
+        data: the queue's head is the flight's.)"""
         s, flight = self._sender, self._flight
         assert flight is not None
         timeout = self._rtt.timeout()
-        early = len(self._early or b"")
         capacity = self._carried(flight.length)
         while s.next <= flight.packets and self._pacer.has_room(now):
             sent, written = s.next, len(out)
-            if len(s.queue) > early:
-                self._flight_bytes += self._send_new(
-                    early, capacity, 1, now, timeout, out, keep=True
-                )
-            elif s.eof_requested and not s.eof_sent and not early:
+            if s.queue:
+                self._flight_bytes += self._send_new(capacity, 1, now, timeout, out, keep=True)
+            elif s.eof_requested and not s.eof_sent:
                 self._send_eof_packet(now, timeout, out)
             else:
                 break

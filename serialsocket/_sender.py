@@ -370,14 +370,6 @@ class Sender:
         self._copy_top = self._copy_cursor = 0
         self._copy_round = 1
 
-    def rearm_all(self, deadline: float) -> None:
-        """Every unacknowledged packet's timer fires no earlier than
-        ``deadline`` (a first flight's, armed before any round trip was
-        known, once the answer measures one)."""
-        for pkt in self.outstanding.values():
-            if not pkt.acked and pkt.deadline is not None and pkt.deadline < deadline:
-                self.arm(pkt, deadline)
-
     def has_retransmit(self) -> bool:
         """A packet waits to be sent again."""
         self._drop_stale_head()
