@@ -11,7 +11,6 @@ import random
 
 import pytest
 
-from linksim.bench._transfer import simulate
 from serialsocket import (
     ConnectionAborted,
     Endpoint,
@@ -23,6 +22,7 @@ from serialsocket._params import LANE_FLIGHT, Flight, InitParameters
 from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, BlockCheck, Packet, build_packet
 
 from .simlink import MOON_HINTS, QueuedRun, SimLink, drop_nth
+from .test_rate_estimation import _simulate
 
 DELAY = 1.3
 DATA = random.Random(14).randbytes(5000)
@@ -216,19 +216,13 @@ def test_a_rate_hint_ten_times_high_does_not_storm_behind_a_flight(rate: int, si
     # estimator must see its packets (the first delivery point is the
     # request, as it is the answer without a flight) to correct the hint; a
     # flight it did not see left 300 bit/s in a storm of 353 timeouts.
-    payload = random.Random(3).randbytes(size)
-    m = simulate(
-        payload,
+    m = _simulate(
+        "wrong-rate-high",
+        payload=random.Random(3).randbytes(size),
         rate=rate,
-        delay=DELAY,
         byte_error_rate=0.0,
-        burst=None,
-        window=31,
-        max_len=None,
-        encoding=PRINTABLE,
-        seed=1,
         time_cap=3000,
-        hints="wrong-rate-high",
+        seed=1,
         first_flight=True,
     )
     assert m.end == "complete"

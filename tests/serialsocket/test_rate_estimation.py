@@ -36,9 +36,10 @@ def _simulate(
     byte_error_rate: float = 1e-4,
     time_cap: float = 20_000,
     seed: int = 3,
+    first_flight: bool = False,
 ) -> Measurement:
     """PAYLOAD (or ``payload``) one way at RATE (or ``rate``), seeded, the
-    defaults otherwise."""
+    defaults otherwise (``first_flight``: the sender flies, PROTOCOL.md 14)."""
     return simulate(
         payload,
         rate=rate,
@@ -51,6 +52,7 @@ def _simulate(
         seed=seed,
         time_cap=time_cap,
         hints=hints,
+        first_flight=first_flight,
     )
 
 
