@@ -21,6 +21,7 @@ from ._params import (
     DENSE_FEATURES,
     FEATURE_EXPEDITED,
     FEATURE_XON_XOFF,
+    LANE_CORRECTION,
     LANE_EARLY,
     LANE_LATEST,
     MAX_LONG_WINDOW,
@@ -232,6 +233,15 @@ class EndpointConfig:
         takes_first_flight: a listener takes a first flight it can read
             (PROTOCOL.md 14).  On by default; False drops every flight (its
             bytes come again after the answer).
+        correction: offer corrected data packets (XLANES bit 8 beside the
+            expedited lane, PROTOCOL.md section 15).  Once agreed, the
+            sender chooses per packet, with its length, whether a data
+            packet carries sums that let the receiver repair one damaged
+            character per block of 255 instead of asking for a resend: only
+            when the losses it has measured make that worth the sums' three
+            characters per block (a clean line never pays for them).  The
+            receiver always reads them.  Off by default (one more bit in the
+            init); the ``serialsocket listen/connect`` netcat turns it on.
         xon_xoff: the line uses software flow control: the escape code must
             escape XON/XOFF as well (declared in XCAPAS, bit 32).
         one_way_delay: a hint, where estimation starts: the link's one-way
@@ -318,6 +328,7 @@ class EndpointConfig:
     early_data: int = DEFAULT_EARLY_DATA
     first_flight: bool = False
     takes_first_flight: bool = True
+    correction: bool = False
     max_packet_time: float | None = DEFAULT_MAX_PACKET_TIME
     xon_xoff: bool = False
     one_way_delay: float = 0.0
@@ -570,7 +581,11 @@ class EndpointConfig:
         if not self.expedited:
             return None
         # (A first flight's bit goes only in the init that announces one.)
-        lanes = (LANE_LATEST if self.latest else 0) | (LANE_EARLY if self.early_data else 0)
+        lanes = (
+            (LANE_LATEST if self.latest else 0)
+            | (LANE_EARLY if self.early_data else 0)
+            | (LANE_CORRECTION if self.correction else 0)
+        )
         return lanes or None
 
     def data_capacity(self, max_packet_length: int, check: BlockCheck) -> int:

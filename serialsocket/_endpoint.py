@@ -65,6 +65,7 @@ from ._expedited import (
     ExpeditedReceiver,
     ExpeditedSender,
 )
+from ._fec import CORRECTED_TYPE, build_corrected, trailer_length
 from ._latest import (
     LATEST,
     LATEST_ACK,
@@ -135,6 +136,10 @@ _DAMAGE = frozenset(
 _CRC16 = BlockCheck.CRC16
 _ACK_C = ord(PacketType.ACK)
 _DATA_C = ord(PacketType.DATA)
+NAK_HORIZON_SLACK = 0.1
+"""The share of the two delays a NAK may arrive early and still be taken as
+about our last copy (:meth:`Endpoint._nak_horizon`)."""
+_CORRECTED_C = ord(CORRECTED_TYPE)
 _ESTABLISHED = State.ESTABLISHED
 _FAILED = State.FAILED
 _T_INIT = PacketType.INIT
@@ -345,6 +350,13 @@ class EndpointStatistics:
     flight_received: int = 0
     """Data packets of the peer's first flight that arrived (copies
     included): taken, or before the window if not taken."""
+    correction: bool = False
+    """Corrected data packets were agreed (PROTOCOL.md section 15)."""
+    corrected_sent: int = 0
+    """Data packets we sent with sums (``d``; first sends and resends)."""
+    repaired: int = 0
+    """Packets from the peer whose check failed and that their sums repaired
+    (each one a resend saved)."""
     packet_length: int = 0
     """The length (MARK through CHECK) new data packets are cut to: measured
     from the losses unless ``max_packet_length`` fixes it (PROTOCOL.md 4.7)."""
@@ -518,6 +530,7 @@ class Endpoint:
                 "flight_packets",
                 "flight_refused",
                 "flight_received",
+                "corrected_sent",
             ),
             0,
         )
@@ -1099,6 +1112,9 @@ class Endpoint:
             flight_packets=c["flight_packets"],
             flight_refused=c["flight_refused"],
             flight_received=c["flight_received"],
+            correction=self._parser.correction,
+            corrected_sent=c["corrected_sent"],
+            repaired=ps.repaired,
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -1117,12 +1133,14 @@ class Endpoint:
         self._events = deque()
         self._parser.reset()
         self._parser.check = BlockCheck.CRC16
+        self._parser.correction = False
         self._parser.max_length = self._max_length
         self._send_check = BlockCheck.CRC16
         self._encoding = PRINTABLE
         self._capacity = 0
         self._adaptive = cfg.max_packet_length is None
         self._length = LengthChooser(self._start_length)
+        self._correction = False
         self._peer_length = self._start_length
         self._mean_wire = float(self._start_length + 1)
         self._pacer.reset()
@@ -1494,6 +1512,7 @@ class Endpoint:
             # (_on_init_answer unwinds a connector's that was not taken).
             self._unwind_flight(self._flight)
         self._parser.check = agreed.check
+        self._parser.correction = agreed.correction
         self._configure_send(agreed, keep_length=taken and flown)
         self._receiver.modulus = agreed.modulus
         self._receiver.window = agreed.window
@@ -1553,6 +1572,8 @@ class Endpoint:
             self._length = LengthChooser(min(self._start_length, agreed.send_max_length))
             if not self._adaptive:
                 self._length.length = agreed.send_max_length
+        self._length.check_length = int(agreed.check)
+        self._correction = agreed.correction
         self._length_changed()
 
     def _time_flight(self, now: float, *, taken: bool) -> None:
@@ -2395,7 +2416,7 @@ class Endpoint:
             else:
                 self._length.lost()
                 self._adapt_length(clean=False)
-                self._length.sent(len(pkt.wire))
+                self._length.sent(len(pkt.wire), corrected=pkt.wire[3] == _CORRECTED_C)
             self._transmit(pkt, now, timeout, out)
             if preempted:
                 self._uncut_until = max(self._uncut_until, pkt.done_at)
@@ -2423,7 +2444,7 @@ class Endpoint:
                 return
             if s.queue:
                 batch = self._pacer.batch(room, now)
-                self._send_new(self._carried(self._length.length), batch, now, timeout, out)
+                self._send_new(self._cut_capacity(), batch, now, timeout, out)
             else:
                 self._send_eof_packet(now, timeout, out)
         if s.has_new_data():
@@ -2444,7 +2465,8 @@ class Endpoint:
         ``keep`` (a first flight's, which may be put back), returns the
         bytes they took, else nothing."""
         s = self._sender
-        short = not self._long_seq and self._send_check is _CRC16
+        sums = self._length.correcting
+        short = not self._long_seq and self._send_check is _CRC16 and not sums
         # (A copy bounds the encoder's work: but for repeat counts, a
         # character carries a byte at most.)
         source = s.queue[: batch * capacity] if keep else s.queue
@@ -2453,6 +2475,10 @@ class Endpoint:
             if short:
                 # The encoder's field holds no MARK: no Packet to check it.
                 wire = _crc16_packet(s.next % 64, _DATA_C, field)
+            elif sums:
+                seq, head = self._seq_fields(s.next)
+                wire = build_corrected(seq, head + field, self._send_check)
+                self._counters["corrected_sent"] += 1
             else:
                 seq, head = self._seq_fields(s.next)
                 wire = build_packet(
@@ -2465,7 +2491,7 @@ class Endpoint:
                 del s.queue[:used]
             # Exposure counts first sends and resends, whose losses
             # show; an idle copy's or a doubled resend's would not.
-            self._length.sent(len(wire))
+            self._length.sent(len(wire), corrected=sums)
             self._mean_wire += (len(wire) - self._mean_wire) / 8
             self._transmit(s.add(wire, used, eof=False), now, timeout, out)
         if not keep:
@@ -2742,18 +2768,38 @@ class Endpoint:
         with long sequence numbers: 31 shorter packets might not cover the
         line's round trip."""
         agreed = self._negotiated
-        if not self._adaptive or agreed is None:
+        if agreed is None:
+            return
+        corrected = self._carried_corrected if self._correction else None
+        if not self._adaptive:
+            # A fixed length: only whether sums pay at it is chosen.
+            fixed = self._length.length
+            self._length.choose(fixed, fixed, self._carried, clean=clean, corrected=corrected)
             return
         upper = self.config.measured_length_cap(agreed.send_max_length, self._rate.rate)
         lower = LADDER[0] if self._long_seq else self._start_length
         before = self._length.length
-        if self._length.choose(lower, upper, self._carried, clean=clean) != before:
+        if (
+            self._length.choose(lower, upper, self._carried, clean=clean, corrected=corrected)
+            != before
+        ):
             self._length_changed()
 
     def _carried(self, length: int) -> int:
         """Data characters a data packet of ``length`` carries."""
         capacity = data_capacity(length, self._send_check)
         return capacity - 2 if self._long_seq else capacity
+
+    def _carried_corrected(self, length: int) -> int:
+        """Data characters a ``d`` packet of ``length`` carries (its sums
+        take three characters per block, PROTOCOL.md 15)."""
+        return self._carried(length) - trailer_length(length, int(self._send_check))
+
+    def _cut_capacity(self) -> int:
+        """Data characters of the next new data packet, sums or not."""
+        if self._length.correcting:
+            return self._carried_corrected(self._length.length)
+        return self._carried(self._length.length)
 
     def _timeout_floor(self, send_max_length: int, receive_max_length: int) -> float:
         """Physical round trip of our full packet, plus the peer's pacing queue
@@ -2807,7 +2853,14 @@ class Endpoint:
         head = b"  " if self._long_seq else b""
         nak = len(build_packet(Packet(seq=0, type=PacketType.NAK, data=head), self._send_check))
         cr = self._tx(1)
-        return 2 * self._one_way() + self._tx(nak) - 2 * cr - TIME_EPSILON
+        # The delay is an estimate (a measured base round trip includes the
+        # peer's ACK decision): a NAK about this very copy arrived 0.08 s
+        # inside an exact horizon at 1.3 s one way and was ignored, and the
+        # timeout that repaired the copy instead came 6 s later.  A NAK about
+        # an earlier copy comes before this copy was handed over, or one of
+        # the peer's repeats, at most one per its retransmission timeout.
+        delays = 2 * self._one_way() * (1.0 - NAK_HORIZON_SLACK)
+        return delays + self._tx(nak) - 2 * cr - TIME_EPSILON
 
     def _effective_window(self) -> int:
         # (Without a rate the first flight grows with every ACK: see below.)

@@ -25,11 +25,22 @@ most doubling: a line that has shown no loss yet has shown little else, and
 a step too far costs the packets sent in one round trip before the losses
 say so.  Sans-I/O: the endpoint reports what it sent, lost and got
 acknowledged, and asks which length to cut next.
+
+With corrected data packets agreed (PROTOCOL.md section 15) the choice is a
+length *and* whether to add sums: a ``d`` packet survives one damaged
+character per block (:func:`serialsocket._fec.survival`) for three
+characters per block.  Its loss says less about ``q`` (only damage to its
+header or check, or two hits in one block, lose it), so its exposure counts
+only the characters whose damage it cannot repair at the rate estimated:
+the estimate neither collapses while the sums hide the damage nor stays
+high long after they stop paying.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+
+from ._fec import survival
 
 __all__ = ["HALF_LIFE", "LADDER", "PRIOR_EXPOSURE", "UP_LOSSES", "LengthChooser"]
 
@@ -60,10 +71,16 @@ class LengthChooser:
 
     Attributes:
         length: the length (MARK through CHECK) to cut new data packets to.
+        correcting: new data packets carry sums (``d``, PROTOCOL.md 15):
+            set only by :meth:`choose`, and only when given ``corrected``.
+        check_length: characters of the block check in force (what sums
+            cannot repair includes the check).
     """
 
-    def __init__(self, start: int) -> None:
+    def __init__(self, start: int, check_length: int = 3) -> None:
         self.length = start
+        self.correcting = False
+        self.check_length = check_length
         self._losses = 0.0
         self._exposure = 0.0
 
@@ -76,43 +93,84 @@ class LengthChooser:
     def _estimate(self, extra_losses: float) -> float:
         return (self._losses + extra_losses) / (self._exposure + PRIOR_EXPOSURE)
 
-    def sent(self, wire_bytes: int) -> None:
-        """A data packet of ``wire_bytes`` characters went on the line (any copy)."""
+    def sent(self, wire_bytes: int, *, corrected: bool = False) -> None:
+        """A data packet of ``wire_bytes`` characters went on the line (a
+        first send or a resend); ``corrected``: a ``d`` packet, whose
+        exposure is the characters it cannot repair (module docstring)."""
         decay = 0.5 ** (wire_bytes / HALF_LIFE)
         self._losses *= decay
-        self._exposure = self._exposure * decay + wire_bytes
+        exposure = float(wire_bytes)
+        if corrected:
+            # The characters whose damage loses it at the rate estimated:
+            # (1 - survival) / q, about its header, check and CR.
+            q = max(self._estimate(0.0), 1.0 / HALF_LIFE)
+            exposure = (1.0 - survival(wire_bytes - 1, q, self.check_length)) / q
+        self._exposure = self._exposure * decay + exposure
 
     def lost(self) -> None:
         """A data packet is being resent: the line lost one (or its ACK)."""
         self._losses += 1.0
 
     def best(
-        self, lower: int, upper: int, carried: Callable[[int], int], *, extra_losses: float = 0.0
-    ) -> int:
+        self,
+        lower: int,
+        upper: int,
+        carried: Callable[[int], int],
+        *,
+        extra_losses: float = 0.0,
+        corrected: Callable[[int], int] | None = None,
+    ) -> tuple[int, bool]:
         """The length in ``lower..upper`` with the best goodput at the estimated
-        error rate (with ``extra_losses`` added): ``carried(n)`` is the data
-        characters a packet of ``n`` carries (the rungs of :data:`LADDER` in
-        range, and ``upper``)."""
+        error rate (with ``extra_losses`` added), and whether with sums:
+        ``carried(n)`` is the data characters a packet of ``n`` carries,
+        ``corrected(n)`` those of a ``d`` packet (None: sums not agreed).
+        The lengths tried: the rungs of :data:`LADDER` in range, and ``upper``."""
         q = self._estimate(extra_losses)
-        options = [n for n in LADDER if lower <= n < upper] + [upper]
-        return max(options, key=lambda n: carried(n) / (n + 1) * (1.0 - q) ** (n + 1))
+        lengths = [n for n in LADDER if lower <= n < upper] + [upper]
 
-    def choose(self, lower: int, upper: int, carried: Callable[[int], int], *, clean: bool) -> int:
+        def goodput(option: tuple[int, bool]) -> float:
+            n, sums = option
+            if sums and corrected is not None:
+                return corrected(n) / (n + 1) * survival(n, q, self.check_length)
+            return carried(n) / (n + 1) * (1.0 - q) ** (n + 1)
+
+        options = [(n, False) for n in lengths]
+        if corrected is not None:
+            options += [(n, True) for n in lengths]
+        return max(options, key=goodput)
+
+    def choose(
+        self,
+        lower: int,
+        upper: int,
+        carried: Callable[[int], int],
+        *,
+        clean: bool,
+        corrected: Callable[[int], int] | None = None,
+    ) -> int:
         """Set and return :attr:`length`: the best length (:meth:`best`) if it is
         shorter; else, when ``clean`` (a packet of the current length was just
         acknowledged on its only copy) and the cautious estimate's best is
         longer, one step towards that, at most twice the current length; with
-        ``lower > upper``, ``upper``."""
+        ``lower > upper``, ``upper``.  :attr:`correcting` becomes whether
+        sums pay at that length under the plain estimate (never without
+        ``corrected``)."""
         lower = min(lower, upper)
         current = min(max(self.length, lower), upper)
-        if (down := self.best(lower, upper, carried)) < current:
+        down, _ = self.best(lower, upper, carried, corrected=corrected)
+        if down < current:
             current = down
-        elif (
-            clean and (target := self.best(lower, upper, carried, extra_losses=UP_LOSSES)) > current
-        ):
-            current = max(
-                (n for n in (*LADDER, target) if current < n <= min(target, 2 * current)),
-                default=current,
+        elif clean:
+            target, _ = self.best(
+                lower, upper, carried, extra_losses=UP_LOSSES, corrected=corrected
             )
+            if target > current:
+                current = max(
+                    (n for n in (*LADDER, target) if current < n <= min(target, 2 * current)),
+                    default=current,
+                )
         self.length = current
+        self.correcting = (
+            corrected is not None and self.best(current, current, carried, corrected=corrected)[1]
+        )
         return current

@@ -221,6 +221,10 @@ class _Tally:
             "flight_refused": st.flight_refused,
             "naks_sent": st.naks_sent,
             "check_failures": st.check_failures,
+            # Corrected data packets (PROTOCOL.md 15): ours sent with sums,
+            # and the peer's that failed their check and the sums repaired.
+            "corrected_sent": st.corrected_sent,
+            "repaired": st.repaired,
             "garbage_bytes": st.garbage_bytes,
             "smoothed_rtt_s": None if st.smoothed_rtt is None else round(st.smoothed_rtt, 3),
             "window": st.effective_window,
@@ -284,6 +288,7 @@ def _config(args: argparse.Namespace, modem: ModemConnection | None) -> Endpoint
         encoding=_PROFILES[args.profile],
         dense=args.dense,  # a byte stream of any content: dense unless told otherwise
         first_flight=True,  # stdin's first bytes leave behind the request (PROTOCOL.md 14)
+        correction=True,  # sums repair single damaged characters (PROTOCOL.md 15)
         window=args.window,
         max_packet_length=args.max_len,
         max_packet_time=args.max_packet_time,

@@ -34,8 +34,9 @@ reads them; telelink adds its own fields after SYSID.  Every field says what
  24   XWINDO     three chars, tochar of 6 bits each, most significant first:
                  the window offered with long sequence numbers (with XCAPAS 1)
  25   XLANES     tochar(further lanes offered): 1 = the latest-value lane,
-                 2 = early data (with XCAPAS 16, after XWINDO when that
-                 is present)
+                 2 = early data, 4 = a first flight, 8 = corrected data
+                 packets (with XCAPAS 16, after XWINDO when that is
+                 present)
  26   XEARLY     only in an ``I`` with XLANES bit 2: two chars, tochar of 6
                  bits each, most significant first: the number ``n`` of
                  characters that follow, then ``n`` characters: the first
@@ -78,6 +79,7 @@ __all__ = [
     "FEATURE_EXPEDITED",
     "FEATURE_RADIX91",
     "FEATURE_XON_XOFF",
+    "LANE_CORRECTION",
     "LANE_EARLY",
     "LANE_FLIGHT",
     "LANE_LATEST",
@@ -144,6 +146,11 @@ offer (:func:`self_agreement`); the XFLIGHT field bounds them.  In a ``Y``:
 your first flight was taken: every packet of it is data of this connection
 (clear: none is, and your data starts again at sequence number k + 1).
 Nowhere else."""
+LANE_CORRECTION = 8
+"""XLANES bit, corrected data packets (PROTOCOL.md section 15): I read ``d``
+packets (a ``D`` whose data is followed by sums that repair one damaged
+character per block); agreed when both set it, and then either side may send
+them."""
 MAX_FLIGHT_PACKETS = 31
 """The most packets a first flight may declare: within any window a telelink
 endpoint offers, and within half the short sequence space."""
@@ -606,6 +613,7 @@ class Negotiated:
             :data:`LONG_SEQ_MODULUS` on the wire (PROTOCOL.md section 9).
         expedited: both offered the expedited lane (PROTOCOL.md section 11).
         latest: both offered the latest-value lane (PROTOCOL.md section 12).
+        correction: both read corrected data packets (PROTOCOL.md section 15).
     """
 
     send_max_length: int
@@ -617,6 +625,7 @@ class Negotiated:
     long_seq: bool = False
     expedited: bool = False
     latest: bool = False
+    correction: bool = False
 
     @property
     def modulus(self) -> int:
@@ -681,6 +690,7 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
     ):
         check = BlockCheck.CRC32
     long_seq = mine.long_window is not None and theirs.long_window is not None
+    both_lanes = (mine.lanes or 0) & (theirs.lanes or 0)
     if mine.long_window is not None and theirs.long_window is not None:
         window = min(mine.long_window, theirs.long_window)
     else:
@@ -694,8 +704,12 @@ def negotiate(mine: InitParameters, theirs: InitParameters) -> Negotiated:
         peer=theirs,
         long_seq=long_seq,
         expedited=bool(common & FEATURE_EXPEDITED),
-        latest=bool(
-            common & FEATURE_EXPEDITED and (mine.lanes or 0) & (theirs.lanes or 0) & LANE_LATEST
+        latest=bool(common & FEATURE_EXPEDITED and both_lanes & LANE_LATEST),
+        # A repair is one more try of the check: only a CRC is strong enough.
+        correction=bool(
+            common & FEATURE_EXPEDITED
+            and both_lanes & LANE_CORRECTION
+            and check in (BlockCheck.CRC16, BlockCheck.CRC32)
         ),
     )
 

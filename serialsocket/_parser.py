@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 from ._checks import _CRC16_FUN, _CRC16_TABLE, BlockCheck, check_chars
 from ._errors import LocalProtocolError
+from ._fec import CORRECTED_TYPE, repair, trailer_length
 from ._packet import _SET_DATA, _SET_SEQ, _SET_TYPE, Packet, _slot_setter, _trusted_packet
 from ._wire import (
     DEFAULT_MAX_PACKET_LENGTH,
@@ -71,8 +72,13 @@ _SPECIAL_TYPES = frozenset(
 _CRC16 = BlockCheck.CRC16
 """(Enum member lookups cost a descriptor call each in Python 3.11.)"""
 
-_FAST_TYPE = bytes(33 <= c <= 126 and c not in _SPECIAL_TYPES for c in range(256))
-"""Type bytes the fast path takes: printable, and checked with the check in force."""
+_CORRECTED_C = ord(CORRECTED_TYPE)
+
+_FAST_TYPE = bytes(
+    33 <= c <= 126 and c not in _SPECIAL_TYPES and c != _CORRECTED_C for c in range(256)
+)
+"""Type bytes the fast path takes: printable, checked with the check in force,
+and not a corrected data packet (which may need its repair)."""
 
 _KNOWN = {ord(t.value): t for t in PacketType}
 _TYPES: tuple[str, ...] = tuple(_KNOWN.get(c, chr(c)) for c in range(256))
@@ -165,6 +171,8 @@ class ParserStatistics:
             packet (filler excluded).
         filler_bytes: CR/LF/NUL skipped between packets.
         resyncs: times the parser had to hunt for a new MARK after damage.
+        repaired: ``d`` packets whose check failed and that a repair of
+            their damage made pass (PROTOCOL.md section 15).
     """
 
     packets: int
@@ -172,6 +180,7 @@ class ParserStatistics:
     garbage_bytes: int
     filler_bytes: int
     resyncs: int
+    repaired: int = 0
 
 
 class PacketParser:
@@ -194,9 +203,17 @@ class PacketParser:
             in 64, and a bogus error aborts the transfer.  Peers that always
             send E with the check in force (telelink endpoints, PROTOCOL.md
             section 2) turn it off.
+        correction: read ``d`` packets as corrected data packets
+            (PROTOCOL.md section 15): one whose check fails is repaired
+            where its sums say (:func:`serialsocket._fec.repair`) and taken
+            if the check then passes; either way it is delivered as the
+            ``D`` packet it carries, its sums removed.  Off (the default, and
+            until the init exchange agrees on it), a ``d`` is an unknown
+            type letter like any other.
 
-    ``check``, ``init_check`` and ``max_length`` may be changed between calls
-    to :meth:`next_event`; the change applies to the next packet.
+    ``check``, ``init_check``, ``max_length`` and ``correction`` may be
+    changed between calls to :meth:`next_event`; the change applies to the
+    next packet.
     """
 
     def __init__(
@@ -207,8 +224,10 @@ class PacketParser:
         init_check: BlockCheck = BlockCheck.SUM6,
         init_max_length: int = 0,
         error_fallback: bool = True,
+        correction: bool = False,
     ) -> None:
         self.max_length = max_length
+        self.correction = correction
         self.init_max_length = init_max_length
         self.check = check
         self.init_check = init_check
@@ -224,6 +243,7 @@ class PacketParser:
         self._garbage = 0
         self._filler = 0
         self._resyncs = 0
+        self._repaired = 0
 
     @property
     def max_length(self) -> int:
@@ -360,6 +380,7 @@ class PacketParser:
             garbage_bytes=self._garbage,
             filler_bytes=self._filler,
             resyncs=self._resyncs,
+            repaired=self._repaired,
         )
 
     def reset(self) -> None:
@@ -424,10 +445,13 @@ class PacketParser:
         end = pos + total
         extended = buf[pos + 1] == 32
         seq_c, type_c = buf[pos + 2], buf[pos + 3]
+        start = pos + (EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH)
+        if type_c == _CORRECTED_C and self.correction:
+            # (Its SEQ is checked once repaired: the sums cover it.)
+            return self._finish_corrected(total, extended, start)
         if not (32 <= seq_c <= 95 and 33 <= type_c <= 126):
             return self._reject(RejectReason.BAD_HEADER, total)
         ptype = _TYPES[type_c]
-        start = pos + (EXTENDED_HEADER_LENGTH if extended else NORMAL_HEADER_LENGTH)
         check = self.check
         if check is _CRC16 and type_c not in _SPECIAL_TYPES and end - start >= 3:
             # The common case, inline: a data or ACK packet under CRC-16.
@@ -461,6 +485,38 @@ class PacketParser:
                     total,
                 )
         return self._reject(RejectReason.BAD_CHECK, total)
+
+    def _finish_corrected(self, total: int, extended: bool, start: int) -> ParserEvent:
+        """A ``d`` packet (``correction`` on): as it came if its check passes,
+        else repaired if a repair passes it; delivered as a ``D`` without its
+        sums, or rejected as a bad check (or bad length: no room for sums)."""
+        buf, pos = self._buf, self._pos
+        end = pos + total
+        check = self.check
+        k = int(check)
+        sums = trailer_length(total, k)
+        if end - start < k + sums:
+            return self._reject(RejectReason.BAD_LENGTH, total)
+        raw = buf[pos:end]
+        if check_chars(check, raw[1 : total - k]) != raw[total - k :]:
+            # A repair is one more try of the check: only under a CRC.
+            fixed = repair(raw, check) if k >= 3 else None
+            if fixed is None:
+                return self._reject(RejectReason.BAD_CHECK, total)
+            if not 32 <= fixed[2] <= 95:
+                return self._reject(RejectReason.BAD_HEADER, total)
+            raw = fixed
+            self._repaired += 1
+        elif not 32 <= raw[2] <= 95:
+            return self._reject(RejectReason.BAD_HEADER, total)
+        self._pos = end
+        self._packets += 1
+        return _received(
+            _trusted_packet(raw[2] - 32, PacketType.DATA, raw[start - pos : total - k - sums]),
+            extended,
+            check,
+            total,
+        )
 
     def _checks_for(self, ptype: str, field: int, extended: bool) -> list[BlockCheck]:
         """Block checks to try, in order, for a packet of this type and field size."""

@@ -78,6 +78,7 @@ class _Direction:
         for d in directions:
             d.encoding = agreed.encoding
             d.parser.check = agreed.check
+            d.parser.correction = agreed.correction  # a d shows as the D it carries
             d.head = 2 if agreed.long_seq else 0
 
     def feed(self, data: bytes | bytearray | memoryview) -> None:

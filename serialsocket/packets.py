@@ -20,6 +20,11 @@ exchange, serialsocket/PROTOCOL.md section 10; design notes in DENSE.md):
 declared unsafe bytes such as :data:`XON_XOFF`) and :class:`Radix91Encoding`
 (printable lines: 16 characters per 13 bytes).
 
+Corrected data packets (negotiated likewise, PROTOCOL.md section 15):
+:func:`build_corrected` builds a ``d`` packet, a ``D`` whose data is
+followed by sums that let a :class:`PacketParser` with ``correction`` on
+repair one damaged character per block of 255.
+
 Parsing: :class:`PacketParser` takes any bytes, line noise included, and
 yields :data:`ParserEvent` s, :class:`PacketReceived` or
 :class:`PacketRejected` (with a :class:`RejectReason`); it counts them in
@@ -41,6 +46,7 @@ from ._dense import Radix91Encoding as Radix91Encoding
 from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
 from ._encoding import PRINTABLE as PRINTABLE
 from ._encoding import Encoding as Encoding
+from ._fec import build_corrected as build_corrected
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity
@@ -81,6 +87,7 @@ __all__ = [
     "ParserStatistics",
     "Radix91Encoding",
     "RejectReason",
+    "build_corrected",
     "build_packet",
     "check_chars",
     "crc16_kermit",

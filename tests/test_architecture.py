@@ -166,6 +166,7 @@ def test_public_names_are_pinned() -> None:
             "ParserStatistics",
             "Radix91Encoding",
             "RejectReason",
+            "build_corrected",
             "build_packet",
             "check_chars",
             "crc16_kermit",

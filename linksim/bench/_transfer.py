@@ -269,6 +269,8 @@ def simulate(
     hints: str = "exact",
     dense: bool = False,
     first_flight: bool = False,
+    correction: bool = False,
+    max_packet_time: float | None = EndpointConfig().max_packet_time,
 ) -> Measurement:
     """Send ``payload`` from end a to end b over the impaired line; measure it.
 
@@ -283,6 +285,10 @@ def simulate(
         first_flight: end a sends what it has queued beyond its request's
             early data as a first flight (serialsocket/PROTOCOL.md 14), as
             the netcat does.
+        correction: both ends offer corrected data packets
+            (serialsocket/PROTOCOL.md 15), as the netcat does.
+        max_packet_time: the longest line time of one data packet with the
+            length measured (the library's default; the netcat sets None).
         time_cap: stop after this many virtual seconds of data transfer and
             report what was delivered (``complete=False``); it bounds the
             CPU spent on hopeless combinations (long packets at high error
@@ -306,6 +312,8 @@ def simulate(
         encoding=encoding,
         dense=dense,
         first_flight=first_flight,
+        correction=correction,
+        max_packet_time=max_packet_time,
     )
     size = len(payload)
     a, b = Endpoint(cfg), Endpoint(cfg)

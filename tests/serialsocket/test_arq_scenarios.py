@@ -24,6 +24,7 @@ from serialsocket import (
     LocalProtocolError,
     State,
 )
+from serialsocket._endpoint import NAK_HORIZON_SLACK
 from serialsocket._pacer import HORIZON_CAP
 from serialsocket.packets import BlockCheck, Packet, PacketType, build_packet
 
@@ -306,9 +307,12 @@ def test_nak_for_a_damaged_packet_is_honoured_on_a_rate_limited_line() -> None:
     # CR arrives, 1 s later; B's NAK (8 bytes with CRC-16) is complete at A at
     # its own last check character, one more second and 7 character times
     # later.  That NAK is about this very copy and must be honoured at once.
-    # A NAK arriving sooner can only be about an earlier copy and must not
-    # provoke another resend.  (Counting both CRs, the threshold was two
-    # character times late and every such NAK was ignored.)
+    # A NAK arriving much sooner can only be about an earlier copy and must
+    # not provoke another resend.  (Counting both CRs, the threshold was two
+    # character times late and every such NAK was ignored.)  The two delays
+    # are an estimate, so the threshold takes them at 0.9 (NAK_HORIZON_SLACK):
+    # at exactly 2 x 1.3 s, a NAK about the copy that came 0.08 s early was
+    # ignored and a timeout repaired the copy 6 s later.
     cfg = EndpointConfig(dense=False, one_way_delay=D, line_rate=2400, window=1)
     a, b, t = connected_on_line(cfg, D, 2400)
     a.send(b"CLOSE", t)
@@ -324,10 +328,12 @@ def test_nak_for_a_damaged_packet_is_honoured_on_a_rate_limited_line() -> None:
     b.receive_data(b"\r", done + D)
     nak_arrives = rejected + (len(nak(1)) - 1) * char + D
     assert len(nak(1)) == 8
-    a.receive_data(nak(1), nak_arrives - 0.001)  # too soon: about an earlier copy
-    assert a.data_to_send(nak_arrives - 0.001) == b""
-    a.receive_data(nak(1), nak_arrives)
-    assert a.data_to_send(nak_arrives) == pkt
+    earliest = nak_arrives - NAK_HORIZON_SLACK * 2 * D
+    a.receive_data(nak(1), earliest - 0.001)  # too soon: about an earlier copy
+    assert a.data_to_send(earliest - 0.001) == b""
+    early = nak_arrives - 0.08  # the estimate's error: about this copy all the same
+    a.receive_data(nak(1), early)
+    assert a.data_to_send(early) == pkt
     s = a.statistics()
     assert (s.naks_received, s.retransmissions, s.timeouts) == (2, 1, 0)
 
