@@ -58,6 +58,7 @@ from serialsocket.packets import (
     Negotiated,
     Packet,
     Radix91Encoding,
+    build_corrected,
     build_packet,
     data_capacity,
 )
@@ -225,12 +226,15 @@ class LineLimit:
     share: float
 
 
-def netcat_config(row: TransferRow, *, hints: bool, dense: bool = True) -> EndpointConfig:
+def netcat_config(
+    row: TransferRow, *, hints: bool, dense: bool = True, correction: bool = True
+) -> EndpointConfig:
     """The configuration ``serialsocket listen``/``connect`` builds for ``row``
     on a relay pty: the netcat's defaults (window, packet length derived from
     the hints), its profile as the pty resolves it (:data:`PROFILES`), the
     dense encodings offered unless ``dense`` is False (``--no-dense``), a
-    first flight sent, and with ``hints`` the line's rate and delay."""
+    first flight sent, corrected data packets offered unless ``correction``
+    is False, and with ``hints`` the line's rate and delay."""
     return EndpointConfig(
         encoding=PROFILES[row.profile],
         dense=dense,
@@ -238,6 +242,7 @@ def netcat_config(row: TransferRow, *, hints: bool, dense: bool = True) -> Endpo
         line_rate=float(row.rate) if hints else None,
         max_packet_time=None,  # the netcat's default: no cap for a byte stream
         first_flight=True,  # as the netcat sends it
+        correction=correction,  # likewise
     )
 
 
@@ -250,7 +255,12 @@ def _encoding_name(agreed: Negotiated) -> str:
 
 
 def line_limit(
-    row: TransferRow, payload: bytes, *, hints: bool = False, dense: bool = True
+    row: TransferRow,
+    payload: bytes,
+    *,
+    hints: bool = False,
+    dense: bool = True,
+    correction: bool = True,
 ) -> LineLimit:
     """The theoretical limit of ``row`` for ``payload`` (module docstring).
 
@@ -259,41 +269,79 @@ def line_limit(
     is left out unless it is the only one, and errors are independent
     (:func:`~linksim.bench._transfer.packet_error_probability`), as in
     :func:`~linksim.bench._transfer.limit_goodput`, which gives the same
-    figure for a classic peer (``dense=False``).
+    figure for a classic peer (``dense=False, correction=False``).  With
+    corrected data packets agreed (``correction``, as the netcat offers
+    them) each length is also tried as ``d`` packets: their sums' characters
+    come out of the data, and a packet is lost only to damage the sums cannot
+    repair (:func:`_unrepaired`).
 
     Raises:
         ValueError: ``payload`` is empty.
     """
     if not payload:
         raise ValueError("the limit is measured on a payload: it cannot be empty")
-    config = netcat_config(row, hints=hints, dense=dense)
+    config = netcat_config(row, hints=hints, dense=dense, correction=correction)
     # The sender measures its packet length (serialsocket/PROTOCOL.md 4.7):
     # the limit is the best of the lengths it may choose.
+    # With corrected data packets agreed it chooses the form too (15.5).
+    forms = (False, True) if agree(config).correction else (False,)
     return max(
-        (_limit_at(row, payload, config, length) for length in config.packet_lengths()),
+        (
+            _limit_at(row, payload, config, length, sums=sums)
+            for length in config.packet_lengths()
+            for sums in forms
+        ),
         key=lambda limit: limit.share,
     )
 
 
-def _limit_at(row: TransferRow, payload: bytes, config: EndpointConfig, length: int) -> LineLimit:
+def _limit_at(
+    row: TransferRow, payload: bytes, config: EndpointConfig, length: int, *, sums: bool
+) -> LineLimit:
     agreed = agree(replace(config, max_packet_length=length, long_window=None))
     capacity = data_capacity(agreed.send_max_length, agreed.check)
+    if sums:
+        # The sums' characters come out of the data (PROTOCOL.md 15.2).
+        capacity -= len(build_corrected(0, b"x" * capacity, agreed.check)) - length - 1
     fields = agreed.encoding.encode_fields(payload, capacity, 1 << 30)
     full = fields[:-1] or fields
     carried = sum(used for _, used in full) / len(full)
-    wire = sum(
-        len(build_packet(Packet(seq=0, type="D", data=field), agreed.check)) for field, _ in full
-    ) / len(full)
-    p_hit = packet_error_probability(wire, row.ber)
+    if sums:
+        packets = [build_corrected(0, field, agreed.check) for field, _ in full]
+    else:
+        packets = [build_packet(Packet(seq=0, type="D", data=f), agreed.check) for f, _ in full]
+    wire = sum(len(p) for p in packets) / len(packets)
+    if sums:
+        p_hit = sum(_unrepaired(p, int(agreed.check), row.ber) for p in packets) / len(packets)
+    else:
+        p_hit = packet_error_probability(wire, row.ber)
     return LineLimit(
         max_packet_length=agreed.send_max_length,
-        encoding=_encoding_name(agreed),
+        encoding=_encoding_name(agreed) + ("+sums" if sums else ""),
         check=agreed.check.name,
         carried=carried,
         wire=wire,
         packet_error=p_hit,
         share=carried / wire * (1.0 - p_hit),
     )
+
+
+def _unrepaired(wire: bytes, check_length: int, q: float) -> float:
+    """Probability that the ``d`` packet ``wire`` (MARK through CR) is lost at
+    independent byte damage ``q``: damage to MARK, the header, the check or
+    the CR, or two damaged characters in one block of the rest (the sums'
+    blocks, PROTOCOL.md 15.2: character ``i`` of LEN onwards in block ``i mod
+    m``; the sums' own characters spread over the blocks likewise)."""
+    header = 7 if wire[1] == 32 else 4
+    fixed = header + check_length + 1
+    rest = len(wire) - fixed
+    m = max(1, -(-(len(wire) - 2 - check_length) // 258))
+    intact = 1.0 - q
+    survive = intact**fixed
+    for j in range(m):
+        n = rest // m + (1 if j < rest % m else 0)
+        survive *= intact**n + n * q * intact ** max(n - 1, 0)
+    return 1.0 - survive
 
 
 # -- running a row ------------------------------------------------------------------------

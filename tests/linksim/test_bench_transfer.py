@@ -33,10 +33,10 @@ def _payload(row: TransferRow, seed: int = 1) -> bytes:
     ("row", "encoding"), [(MOON_1E4, EIGHT_BIT_CLEAN), (PRINTABLE_1E4, PRINTABLE)]
 )
 def test_limit_is_goodput_s_for_a_classic_peer(row: TransferRow, encoding: object) -> None:
-    """With the dense encodings off, the limit is limit_goodput's, to the last bit:
-    the same definitions, only the agreed encoding differs."""
+    """With the dense encodings and the sums off, the limit is limit_goodput's,
+    to the last bit: the same definitions, only the agreed encoding differs."""
     payload = _payload(row)
-    classic = table.line_limit(row, payload, dense=False)
+    classic = table.line_limit(row, payload, dense=False, correction=False)
     assert classic.encoding == "prefix"
     goodput, p_hit = limit_goodput(
         payload,
@@ -52,8 +52,16 @@ def test_limit_is_goodput_s_for_a_classic_peer(row: TransferRow, encoding: objec
 def test_limit_on_a_printable_line_is_radix_91_at_the_best_length() -> None:
     limit = table.line_limit(PRINTABLE_1E4, _payload(PRINTABLE_1E4))
     # The sender measures its packet length (serialsocket/PROTOCOL.md 4.7):
-    # the limit is the best length it may choose, 384 at 1e-4.
-    assert (limit.encoding, limit.max_packet_length, limit.check) == ("radix-91", 384, "CRC16")
+    # the limit is the best length it may choose, 384 at 1e-4 -- or, with
+    # sums that repair one damaged character per block (15), 1024.
+    assert (limit.encoding, limit.max_packet_length, limit.check) == (
+        "radix-91+sums",
+        1024,
+        "CRC16",
+    )
+    plain = table.line_limit(PRINTABLE_1E4, _payload(PRINTABLE_1E4), correction=False)
+    assert (plain.encoding, plain.max_packet_length) == ("radix-91", 384)
+    assert plain.share < limit.share
     assert limit.share == limit.carried / limit.wire * (1 - limit.packet_error)
     # At 128, an extended-length packet: 7 header characters, room for 118
     # data characters of which radix 91 fills 117 (7 blocks of 13 bytes in 16
@@ -66,11 +74,12 @@ def test_limit_on_an_8_bit_line_is_the_escape_code() -> None:
     payload = _payload(MOON_1E4)
     dense = table.line_limit(MOON_1E4, payload)
     classic = table.line_limit(MOON_1E4, payload, dense=False)
-    assert (dense.encoding, dense.max_packet_length, dense.check) == ("escape", 384, "CRC16")
+    assert (dense.encoding, dense.max_packet_length, dense.check) == ("escape+sums", 1024, "CRC16")
     assert dense.share == dense.carried / dense.wire * (1 - dense.packet_error)
-    # Escaping costs about 1 % on random binary where Kermit prefixing costs 27 %.
+    # Escaping costs about 1 % on random binary where Kermit prefixing costs
+    # 27 %; the sums 12 characters of 1024, and a loss in 400 packets.
     assert 1.0 < dense.wire / dense.carried < 1.05
-    assert 0.9 < dense.share < 0.95
+    assert 0.95 < dense.share < 0.98
     assert classic.share < dense.share
     clean = table.line_limit(TRANSFER_ROWS[0], _payload(TRANSFER_ROWS[0]))
     assert clean.packet_error == 0.0
@@ -80,14 +89,15 @@ def test_limit_on_an_8_bit_line_is_the_escape_code() -> None:
 def test_limit_is_at_the_best_length_whatever_the_hints() -> None:
     """9600 bit/s, 1.3 s, 1e-3: the packets start at 128 without hints and 256
     with them (31 packets of 128 cannot cover a repair), but the length is
-    measured, and the best at 1e-3 is 96 (the longest normal packet); on a
-    clean line, the whole receive limit."""
+    measured, and the best at 1e-3 is 384 with sums (96, the longest normal
+    packet, without them); on a clean line, the whole receive limit."""
     row = TRANSFER_ROWS[4]
     payload = _payload(row)
     plain = table.line_limit(row, payload)
     hinted = table.line_limit(row, payload, hints=True)
     assert plain == hinted
-    assert plain.max_packet_length == 96
+    assert (plain.encoding, plain.max_packet_length) == ("escape+sums", 384)
+    assert table.line_limit(row, payload, correction=False).max_packet_length == 96
     clean = table.line_limit(TRANSFER_ROWS[0], _payload(TRANSFER_ROWS[0]))
     assert clean.max_packet_length == 1024
     assert plain.share < clean.share < 1
