@@ -53,7 +53,11 @@ receiver moved on by more than 32 packets is indistinguishable from a new one
 model's fault, not the endpoint's.  For the same reason the block check is
 CRC-16 or CRC-32 (drawn per side; agreed between two dense ends), which catch
 every 1-, 2- or 3-bit error in a packet (the additive 6- and 12-bit checks
-can be fooled by two compensating flips).  Each side also draws its line
+can be fooled by two compensating flips).  (With corrected data packets
+agreed, two flips in one block of a ``d`` packet make the repair try a third
+change, and CRC-16 misses a four-bit error about once in 65 536 such
+packets: PROTOCOL.md 15.4's price, far rarer than anything a run meets.)
+Each side also draws its line
 profile (printable or 8-bit), whether it offers the dense encodings, and
 XON/XOFF: the ends then talk the Kermit prefix profile, the radix-91 packing
 or the escape code (PROTOCOL.md section 10), so all of them cross the wire.
@@ -387,6 +391,10 @@ def endpoint_configs(
         # than its init carries, taken by a listener that can read it.
         first_flight=draw(st.sampled_from([True, True, False])),
         takes_first_flight=draw(st.sampled_from([True, True, True, False])),
+        # Corrected data packets (section 15): agreed when both offer them
+        # (with the expedited lane's XLANES and a CRC); a sender adds sums
+        # once the losses it has seen make them pay.
+        correction=draw(st.sampled_from([True, True, False])),
         xon_xoff=draw(st.booleans()),
         one_way_delay=one_way_delay,
         line_rate=line_rate,
@@ -967,6 +975,17 @@ class ARQMachine(RuleBasedStateMachine):
         if sa.flight_refused and a.state is not State.CONNECTING:
             # Not taken: its numbers were skipped, on both sides alike.
             assert sa.send_next > sa.flight_announced, sa
+
+    @invariant()
+    def sums_only_when_agreed(self) -> None:
+        """Only a side that agreed on corrected data packets (PROTOCOL.md 15)
+        sends ``d`` packets, and only a side that agreed repairs any."""
+        for side in SIDES:
+            st_ = self.ep[side].statistics()
+            if not st_.correction:
+                assert st_.corrected_sent == 0, (side, st_)
+                assert st_.repaired == 0, (side, st_)
+            assert st_.repaired <= st_.packets_received, (side, st_)
 
     @invariant()
     def connection_stays_alive(self) -> None:

@@ -8,10 +8,11 @@ due timers, application reads and writes on both sides, and honest exchanges
 of what each side queued.
 
 Each side's configuration comes first: a flag byte (bit 1: long sequence
-numbers; 0x08: take no first flight; 0x10: send one, with bytes from the
+numbers; 0x02: offer corrected data packets; 0x08: take no first flight;
+0x10: send one, with bytes from the
 input queued before connecting; 0x20: offer the dense encodings; 0x40: the
-line uses XON/XOFF; 0x80: ask for CRC-32 -- PROTOCOL.md sections 9, 10 and
-14), the window unless
+line uses XON/XOFF; 0x80: ask for CRC-32 -- PROTOCOL.md sections 9, 10, 14
+and 15), the window unless
 long, a 16-bit packet length (0xF000 and above: measured, PROTOCOL.md 4.7)
 and the line (even: printable, odd: 8-bit).  Two dense sides agree on the
 escape code (8-bit; with XON/XOFF escaped if either declares it) or the
@@ -20,8 +21,10 @@ fresh listener a request whose data field is the input's (what decodes is
 answered, the rest refused: never an exception).  Forged packets
 are then built with the agreed check, and op 1 encodes a ``D`` packet's data
 with the agreed encoding (after the two high sequence characters, from the
-input, when long sequence numbers are agreed).  Properties (any violation
-raises):
+input, when long sequence numbers are agreed); with corrected data packets
+agreed it may send that ``D`` as a ``d`` packet (sums behind its data) with
+one character replaced by the input's, which the receiver repairs or
+rejects.  Properties (any violation raises):
 
 * ``receive_data``, ``handle_timer``, ``data_to_send``, ``read`` and
   ``statistics`` never raise, whatever arrives: a bad packet is counted;
@@ -49,13 +52,21 @@ with instrumented(__name__ == "__main__"):
         LocalProtocolError,
         State,
     )
-    from serialsocket.packets import EIGHT_BIT_CLEAN, PRINTABLE, BlockCheck, Packet, build_packet
+    from serialsocket.packets import (
+        EIGHT_BIT_CLEAN,
+        PRINTABLE,
+        BlockCheck,
+        Packet,
+        build_corrected,
+        build_packet,
+    )
 
 _TYPES = "DYNZEISBFXAR?"
 _TIMER_SPIN_LIMIT = 64
 """Consecutive timer firings at one instant before it counts as a spin."""
 
 
+_CORRECTION = 0x02
 _NO_FLIGHT = 0x08
 _FLIGHT = 0x10
 _DENSE = 0x20
@@ -80,6 +91,7 @@ def _config(r: Reader) -> EndpointConfig:
         xon_xoff=bool(flags & _XON_XOFF),
         check=BlockCheck.CRC32 if flags & _CRC32 else BlockCheck.CRC16,
         first_flight=bool(flags & _FLIGHT),
+        correction=bool(flags & _CORRECTION),
         takes_first_flight=not flags & _NO_FLIGHT,
         one_way_delay=60.0 if long else 1.0,
         line_rate=9600.0 if long else None,
@@ -138,7 +150,14 @@ def one_input(data: bytes) -> None:
                 if long_seq:  # the two high sequence characters (PROTOCOL.md 9)
                     payload = bytes((32 + r.byte() % 64, 32 + r.byte() % 64)) + payload
             wire_check = check if r.byte() % 8 else BlockCheck.SUM6
-            b.receive_data(build_packet(Packet(seq=seq, type=ptype, data=payload), wire_check), now)
+            wire = build_packet(Packet(seq=seq, type=ptype, data=payload), wire_check)
+            if op == 1 and ptype == "D" and agreed is not None and agreed.correction:
+                how = r.u16()
+                if how & 1:  # as a d packet, one character of it the input's
+                    damaged = bytearray(build_corrected(seq, payload, check))
+                    damaged[1 + (how >> 1) % (len(damaged) - 2)] = r.byte() or 2
+                    wire = bytes(damaged)
+            b.receive_data(wire, now)
         elif op == 2:  # raw bytes on the line
             b.receive_data(r.take(r.byte()), now)
         elif op == 3:  # time passes; timers fire on both sides

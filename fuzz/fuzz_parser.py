@@ -1,8 +1,10 @@
 """atheris harness: the Kermit packet parser and the prefix decoders.
 
 Input: a byte stream cut into chunks at positions the fuzzer chooses, fed to a
-:class:`~serialsocket.packets.PacketParser` whose ``max_length`` and expected block
-check are also chosen by the fuzzer.  Properties (any violation raises):
+:class:`~serialsocket.packets.PacketParser` whose ``max_length``, expected block
+check and ``correction`` (``d`` packets repaired, PROTOCOL.md section 15;
+bit 7 of the second byte) are also chosen by the fuzzer.  Properties (any
+violation raises):
 
 * the parser never raises on input: damage is a counted ``PacketRejected``;
 * it buffers at most one packet of ``max_length`` plus the last chunk;
@@ -11,7 +13,12 @@ check are also chosen by the fuzzer.  Properties (any violation raises):
 * both prefix decoders (``decode`` and the sequential reference) agree on the
   accepted packet's data, raising only ``MalformedDataError``;
 * every dense decoder (escape code, escape with XON/XOFF, radix 91; PROTOCOL.md
-  section 10) accepts an accepted packet's data only in its canonical encoding.
+  section 10) accepts an accepted packet's data only in its canonical encoding;
+* with ``correction``, every accepted ``D`` packet sent as a ``d`` packet
+  (``build_corrected``) with one character damaged, anywhere past LEN, TYPE
+  and the extended header and before the check, to any value but MARK, is
+  read back as the same packet (PROTOCOL.md 15.3), and damaged in the
+  check it is never read as another packet.
 
 The same cut chunks, and the data fields of the accepted packets, are then
 decoded as the fields of one arrival by every encoding, prefix and dense:
@@ -40,10 +47,12 @@ with instrumented(__name__ == "__main__"):
         XON_XOFF,
         BlockCheck,
         EscapeEncoding,
+        Packet,
         PacketParser,
         PacketReceived,
         PacketRejected,
         Radix91Encoding,
+        build_corrected,
         build_packet,
     )
 
@@ -96,13 +105,37 @@ def _check_cutting(stream: bytes, capacity: int, count: int) -> None:
             raise AssertionError(f"{enc!r}: cut fields decode to {back!r}")
 
 
+def _check_repair(packet: Packet, check: BlockCheck, where: int, value: int) -> None:
+    """``packet`` as a ``d`` packet damaged at one character is read back as
+    itself where the sums repair it (SEQ of a normal packet, and past the
+    header before the check) and rejected when the damage is in the check.  (Damage
+    to LEN or TYPE reframes the packet: CRC-16 then passes it about once in
+    65 536 tries, not a property to hold the repair to.)"""
+    wire = build_corrected(packet.seq, packet.data, check)[:-1]  # (no CR)
+    at = 1 + where % (len(wire) - 1)
+    if value == 1 or wire[at] == value:
+        return
+    damaged = wire[:at] + bytes((value,)) + wire[at + 1 :]
+    reader = PacketParser(max_length=len(wire), check=check, correction=True)
+    reader.receive_data(damaged)
+    got = reader.next_event()
+    header = 7 if wire[1] == 32 else 4
+    repairable = (at == 2 and header == 4) or header <= at < len(wire) - int(check)
+    if at >= len(wire) - int(check):
+        if isinstance(got, PacketReceived):
+            raise AssertionError(f"{damaged!r} (its check damaged) read as {got.packet!r}")
+    elif repairable and (not isinstance(got, PacketReceived) or got.packet != packet):
+        raise AssertionError(f"{damaged!r} (damaged at {at}) read as {got!r}, not {packet!r}")
+
+
 def one_input(data: bytes) -> None:
     if len(data) < 3:
         return
     max_length = 12 + int.from_bytes(data[:2], "big") % 9020
     check = _CHECKS[data[2] % len(_CHECKS)]
+    correction = bool(data[1] & 0x80)
     stream = data[3:]
-    parser = PacketParser(max_length=max_length, check=check)
+    parser = PacketParser(max_length=max_length, check=check, correction=correction)
     pos = 0
     step = 1 + (data[2] >> 2)
     chunks: list[bytes] = []
@@ -120,6 +153,8 @@ def one_input(data: bytes) -> None:
                 echo = again.next_event()
                 if not isinstance(echo, PacketReceived) or echo.packet != event.packet:
                     raise AssertionError(f"re-serialised {event.packet!r} parsed as {echo!r}")
+                if correction and event.packet.type == "D" and int(event.check) >= 3:
+                    _check_repair(event.packet, event.check, data[0] * 256 + data[1], data[2])
                 for enc in (PRINTABLE, EIGHT_BIT_CLEAN):
                     fast = _decoded(enc.decode, event.packet.data)
                     slow = _decoded(enc._decode_sequential, event.packet.data)
