@@ -349,8 +349,13 @@ class Encoding:
         append = fields.append
         bisect_right = bisect.bisect_right
         char_base = unit_base = src_base = made = 0
-        last = count - 1
         more = len(view) > len(arr)
+        # With more source beyond the slice, its last units may not be final:
+        # a run the slice cut short is one or two single tokens here and one
+        # repeat token in the whole (encode_prefix's _open_units).  A field
+        # that would take any of them, or end at the slice's end, is cut by
+        # encode_prefix, which reads as far as it needs.
+        final_units = n_units - max(self._open_units(arr), 1) if more else n_units
         # A field holds at least capacity / 5 tokens (one is at most 5
         # characters) and at most `capacity` (one is at least 1): search there.
         # (Plain comparisons, not min(): this loop runs once per packet.)
@@ -363,9 +368,12 @@ class Encoding:
             if hi > n_units:
                 hi = n_units
             cut = bisect_right(char_ends, char_base + capacity, lo, hi)
-            if cut == n_units and made == last and more:
-                # The last field may want more source than the slice held.
-                append(self.encode_prefix(view[src_base:], capacity))
+            if cut > final_units:
+                field = self.encode_prefix(view[src_base:], capacity)
+                append(field)
+                rest = src_base + field[1]
+                if made + 1 < count and rest < len(view):
+                    fields.extend(self.encode_fields(view[rest:], capacity, count - made - 1))
                 return fields
             char_end = char_ends[cut - 1]
             src_end = cut if src_ends is None else src_ends[cut - 1]

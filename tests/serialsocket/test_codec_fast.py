@@ -137,6 +137,24 @@ def test_encode_prefix_never_cuts_a_run_at_its_slice(enc: Encoding) -> None:
 
 
 @pytest.mark.parametrize("enc", ALL_PROFILES, ids=repr)
+def test_encode_fields_never_cuts_a_run_at_its_slice(enc: Encoding) -> None:
+    """The same in encode_fields, found by fuzz_parser (2026-12-05): its slice
+    ended two bytes into a run of seven 0xFF, which it read as two single
+    tokens, and a field that had room for one of them but not for the run's
+    repeat token took it, where encode_prefix (reading the whole run) took
+    neither: the field depended on how far the slice reached."""
+    data = b"r" * 30 + b"\0" * 7 + b"[" + b"r" * 36 + b"\xff" * 7 + b"\x04rrrrr\x00\x91\xfe\x01"
+    for count in range(1, 6):
+        expected = []
+        rest = data
+        while rest and len(expected) < count:
+            field, used = _reference_encode_prefix(enc, rest, 7)
+            expected.append((field, used))
+            rest = rest[used:]
+        assert enc.encode_fields(data, 7, count) == expected, count
+
+
+@pytest.mark.parametrize("enc", ALL_PROFILES, ids=repr)
 def test_every_byte_value_and_run_boundary(enc: Encoding) -> None:
     # Each byte value alone, in runs of 1..3 and around the 94-byte repeat limit.
     for n in (1, 2, 3, 4, 93, 94, 95, 96, 97, 188, 189):
