@@ -676,7 +676,7 @@ def _print_transfer_row(r: dict[str, Any]) -> None:
     line, profile = r["spec"].rsplit("/", 1)
     print(
         f"{number:>2} {line:<15} {profile:<9} {r['seed']:>4} {measured} "
-        f"{r['limit_share']:6.3f} {ratio} {target:>6} {agreed:<13} {result}",
+        f"{r['limit_share']:6.3f} {ratio} {target:>6} {agreed:<18} {result}",
         flush=True,
     )
 
@@ -703,7 +703,7 @@ def transfer_main(args: argparse.Namespace) -> int:
         )
         print(
             f"{'#':>2} {'line':<15} {'profile':<9} {'seed':>4} {'share':>6} {'s':>6} "
-            f"{'limit':>6} {'ratio':>6} {'target':>6} {'agreed':<13} result",
+            f"{'limit':>6} {'ratio':>6} {'target':>6} {'agreed':<18} result",
             flush=True,
         )
     records = run_transfer_table(
