@@ -194,6 +194,7 @@ class _Tally:
             return record | {"connected": False}
         sock = self.sock.statistics()
         st = sock.link
+        # (Outside trio -- the report at exit -- the end is always set.)
         end = self.ended_at if self.ended_at is not None else trio.current_time()
         seconds = max(end - self.connected_at, 1e-9)
         record |= {
@@ -340,9 +341,13 @@ async def _run(args: argparse.Namespace, listening: bool, tally: _Tally) -> None
         try:
             await _pump(sock, tally)
         finally:
-            await sock.aclose()
-            tally.ended_at = trio.current_time()
-            nursery.cancel_scope.cancel()  # the progress line, nothing else is left
+            try:
+                await sock.aclose()
+            finally:
+                # Also when the close is interrupted (Ctrl-C): the report,
+                # made after trio has returned, needs the end.
+                tally.ended_at = trio.current_time()
+                nursery.cancel_scope.cancel()  # the progress line, nothing else is left
         # Exit 0 means delivered: every byte of stdin acknowledged by the peer
         # and the peer's EOF received (so all it sent is on our stdout).  Our
         # own close ending is not that: the close says whether it was

@@ -13,6 +13,7 @@ import json
 import os
 import pathlib
 import random
+import select
 import signal
 import subprocess
 import sys
@@ -379,3 +380,67 @@ def test_progress_is_one_rewritten_line_when_stderr_is_a_terminal(
     assert b"\r\x1b[K" in shown  # the line is rewritten in place ...
     assert shown.endswith(b"\r\x1b[K")  # ... and erased at the end
     assert b"connecting..." in shown or b"acknowledged" in shown, shown
+
+
+def test_ctrl_c_mid_transfer_exits_130_with_its_report(tmp_path: pathlib.Path) -> None:
+    """Ctrl-C while the data flows: exit 130, no traceback, the ``--json``
+    report says interrupted, and the listener has a correct prefix.  (The
+    report read the end time from trio after trio had returned when the
+    interrupt cut the close short: a traceback and exit 1.)"""
+    relay = subprocess.Popen(
+        [sys.executable, "-m", "linksim", "relay", "--json", "--rate", "9600", "--delay", "0.002"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    payload = random.Random(7).randbytes(40_000)  # 40 s of this line
+    (tmp_path / "up").write_bytes(payload)
+    try:
+        assert relay.stdout is not None
+        paths = json.loads(relay.stdout.readline())
+        server = subprocess.Popen(
+            cli("listen", paths["b"], "--dead-after", "60"),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        try:
+            wait_until_reading(server, paths["b"])
+            with (tmp_path / "up").open("rb") as up_in:
+                client = subprocess.Popen(
+                    cli("connect", paths["a"], "--connect-timeout", "30", "--json"),
+                    stdin=up_in,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE,
+                    # A test run started in the background inherits SIGINT ignored.
+                    preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+                )
+            try:
+                assert server.stdout is not None
+                first = b""
+                while len(first) < 2000:  # the transfer is under way
+                    # (Unbuffered: communicate() reads the pipe's descriptor.)
+                    ready, _, _ = select.select([server.stdout], [], [], GUARD)
+                    assert ready, "nothing arrived"
+                    chunk = os.read(server.stdout.fileno(), 4096)
+                    assert chunk, "the listener closed its stdout"
+                    first += chunk
+                client.send_signal(signal.SIGINT)
+                _, err = client.communicate(timeout=GUARD)
+                rest, _ = server.communicate(timeout=GUARD)
+            finally:
+                _reap(client)
+        finally:
+            _reap(server)
+    finally:
+        relay.send_signal(signal.SIGTERM)
+        relay.wait(timeout=GUARD)
+    text = err.decode()
+    assert client.returncode == 130, text[-2000:]
+    assert "Traceback" not in text
+    record = json.loads(text.splitlines()[-1])
+    assert record["outcome"] == "interrupted"
+    assert record["connected"] is True
+    got = first + rest
+    assert 2000 <= len(got) < len(payload)
+    assert got == payload[: len(got)]
+    assert server.returncode == 1  # the peer aborted: not delivered
