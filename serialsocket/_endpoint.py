@@ -113,7 +113,7 @@ from ._state import (
     allowed,
     transition,
 )
-from ._wire import PacketType, tochar, unchar
+from ._wire import EXTENDED_HEADER_LENGTH, NORMAL_HEADER_LENGTH, PacketType, tochar, unchar
 
 __all__ = ["Endpoint", "EndpointStatistics"]
 
@@ -2416,6 +2416,7 @@ class Endpoint:
             else:
                 self._length.lost()
                 self._adapt_length(clean=False)
+                self._add_sums(pkt)
                 self._length.sent(len(pkt.wire), corrected=pkt.wire[3] == _CORRECTED_C)
             self._transmit(pkt, now, timeout, out)
             if preempted:
@@ -2499,6 +2500,24 @@ class Endpoint:
         took = bytes(s.queue[:taken])
         del s.queue[:taken]
         return took
+
+    def _add_sums(self, pkt: Outstanding) -> None:
+        """A data packet lost before the sums went on is resent as a ``d``
+        packet with the same data when sums pay at its length now and it
+        still fits the peer's limit (PROTOCOL.md 15.5): at 1e-3 a
+        513-character ``D`` arrives whole six times in ten, and one was lost
+        five times running, each loss of its resend a timeout."""
+        wire = pkt.wire
+        agreed = self._negotiated
+        if not self._correction or agreed is None or wire[3] != _DATA_C:
+            return
+        length = len(wire) - 1  # (MARK through CHECK: no CR)
+        head = EXTENDED_HEADER_LENGTH if wire[1] == 32 else NORMAL_HEADER_LENGTH
+        check = self._send_check
+        sums = build_corrected(wire[2] - 32, wire[head : length - int(check)], check)
+        if len(sums) - 1 <= agreed.send_max_length and self._length.sums_pay(length, len(sums) - 1):
+            pkt.wire = sums
+            self._counters["corrected_sent"] += 1
 
     def _send_eof_packet(self, now: float, timeout: float, out: list[bytes]) -> None:
         seq, head = self._seq_fields(self._sender.next)

@@ -139,6 +139,15 @@ class LengthChooser:
             options += [(n, True) for n in lengths]
         return max(options, key=goodput)
 
+    def sums_pay(self, plain: int, with_sums: int) -> bool:
+        """Whether a packet of ``plain`` characters (MARK through CHECK) is
+        better sent as the ``d`` packet of ``with_sums`` carrying the same
+        data: more of it arrives per character of line at the estimated
+        error rate (a resend's form, PROTOCOL.md 15.5)."""
+        q = self._estimate(0.0)
+        bare = (1.0 - q) ** (plain + 1) / (plain + 1)
+        return survival(with_sums, q, self.check_length) / (with_sums + 1) > bare
+
     def choose(
         self,
         lower: int,
