@@ -37,8 +37,10 @@ from ._pyserial import (
     discard_unsent,
     holds_output,
     open_serial,
+    plain_tcp_socket,
     port_encoding,
     read_blocks_for_one_byte,
+    read_burst,
 )
 
 __all__ = ["AsyncPort", "AsyncioSerialPort", "open_port", "open_pty_pair", "port_statistics"]
@@ -311,6 +313,7 @@ class _ThreadTransport:
 
     def __init__(self, ser: Any, loop: asyncio.AbstractEventLoop) -> None:
         self._ser = ser
+        self._tcp = plain_tcp_socket(ser)
         self._loop = loop
         self.can_discard = False
         self._stop = threading.Event()
@@ -342,20 +345,9 @@ class _ThreadTransport:
                 return
 
     def _read_available(self) -> bytes:
-        """One byte with the timeout, then what else is already there, up to
-        :data:`_THREAD_BURST` bytes (``in_waiting`` is only a lower bound for
-        ``socket://``, which then reads byte by byte: without the bound a
-        steady stream would be held back until it paused, ACKs with it)."""
-        data = bytearray(self._ser.read(1))
-        while data and len(data) < _THREAD_BURST:
-            more = min(self._ser.in_waiting, _THREAD_BURST - len(data))
-            if more <= 0:
-                break
-            chunk = self._ser.read(more)
-            if not chunk:
-                break
-            data += chunk
-        return bytes(data)
+        # Bounded by _THREAD_BURST: without the bound a steady stream would
+        # be held back until it paused, ACKs with it.
+        return read_burst(self._ser, self._tcp, _THREAD_BURST)
 
     def discard_output(self) -> None:
         # A URL has no UART queue of ours to drop: nothing to do.

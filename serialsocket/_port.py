@@ -47,8 +47,10 @@ from ._pyserial import (
     discard_unsent,
     holds_output,
     open_serial,
+    plain_tcp_socket,
     port_encoding,
     read_blocks_for_one_byte,
+    read_burst,
 )
 from ._pyserial import THREAD_READ_TIMEOUT as _THREAD_READ_TIMEOUT
 
@@ -327,6 +329,7 @@ class _ThreadTransport:
 
     def __init__(self, ser: Any) -> None:
         self._ser = ser
+        self._tcp = plain_tcp_socket(ser)
         self.can_discard = False
         self._stop = threading.Event()
         send, self._receive = trio.open_memory_channel[bytes | BaseException](_THREAD_QUEUE)
@@ -357,23 +360,7 @@ class _ThreadTransport:
                 trio.from_thread.run_sync(send.close, trio_token=self._token)
 
     def _read_available(self) -> bytes:
-        """One byte with the timeout, then everything else already there.
-
-        ``in_waiting`` is only a lower bound for some backends: pyserial's
-        ``socket://`` reports 0 or 1 whatever is queued.  So keep asking until
-        it says 0 (or a chunk is full): one hand-off to trio per burst rather
-        than per two bytes (issue 19: 20 KB took 1326 hand-offs).
-        """
-        data = bytearray(self._ser.read(1))
-        while data and len(data) < _READ_SIZE:
-            more = min(self._ser.in_waiting, _READ_SIZE - len(data))
-            if more <= 0:
-                break
-            chunk = self._ser.read(more)
-            if not chunk:
-                break
-            data += chunk
-        return bytes(data)
+        return read_burst(self._ser, self._tcp, _READ_SIZE)
 
     def discard_output(self) -> None:
         # A URL has no UART queue of ours to drop (socket:// hands bytes to

@@ -531,9 +531,9 @@ def test_two_sockets_over_pyserial_socket_urls() -> None:
         modem = await asyncio.start_server(on_connect, "127.0.0.1", 0)
         url = f"socket://127.0.0.1:{modem.sockets[0].getsockname()[1]}"
         a, b = await sa.open_port(url), await sa.open_port(url)
-        # Small, and patient: pyserial's socket:// reads byte by byte in a thread
-        # that waits for the GIL while the loop works -- correct, not fast; on a
-        # loaded machine the default 2 s of silence could pass for a dead link.
+        # Small, and patient: the URL port reads in a thread that waits for the
+        # GIL while the loop works; on a loaded machine the default 2 s of
+        # silence could pass for a dead link.
         client, server = await pair(a, b, EndpointConfig(dead_after=GUARD))
         ab, ba = PAYLOAD[:3000], PAYLOAD[:2000][::-1]
         got_at_server, got_at_client = await exchange(client, server, ab, ba)
@@ -546,6 +546,46 @@ def test_two_sockets_over_pyserial_socket_urls() -> None:
         modem.close()
         for _, writer in joined:
             writer.close()
+        await modem.wait_closed()
+
+    run(main)
+
+
+def test_a_socket_url_port_reads_what_tcp_has_queued_in_one_call() -> None:
+    """The asyncio port's reader thread reads socket:// as the trio port's
+    does (tests/serialsocket/test_port.py): one recv of everything queued,
+    not recv(1) per byte."""
+    payload = bytes(range(256)) * 16  # 4096 bytes: one _THREAD_BURST
+
+    async def main() -> None:
+        peers: list[asyncio.StreamWriter] = []
+
+        async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            peers.append(writer)
+
+        modem = await asyncio.start_server(on_connect, "127.0.0.1", 0)
+        port = await sa.open_port(f"socket://127.0.0.1:{modem.sockets[0].getsockname()[1]}")
+        reads = 0
+        read = port.serial.read
+
+        def counted(size: int = 1) -> bytes:
+            nonlocal reads
+            reads += 1
+            return bytes(read(size))
+
+        port.serial.read = counted  # the reader thread's next read is counted
+        while not peers:
+            await asyncio.sleep(0.01)
+        peers[0].write(payload)
+        got = b""
+        async with asyncio.timeout(GUARD):
+            while len(got) < len(payload):
+                got += await port.read(len(payload) - len(got))
+        assert got == payload
+        assert reads <= 100, reads
+        await port.aclose()
+        peers[0].close()
+        modem.close()
         await modem.wait_closed()
 
     run(main)
