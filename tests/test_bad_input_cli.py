@@ -268,7 +268,7 @@ FREE_TEXT = {
     "log": "a file written (console --log) or read (plot FILE), exit 1 or 2",
     "out": "plot --out: the PNG written, exit 1",
     "pairs": "bench kermit: SENDER->RECEIVER checked by main, exit 2",
-    "profile": "bench pty --profile: a file written",
+    "cprofile": "bench pty --cprofile: a file written",
     "from_json": "bench goodput: a file read",
     "output": "bench goodput: a file written",
     "plot": "bench goodput: a PNG written; a folder that is not there: one line, exit 2",

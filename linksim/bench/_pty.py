@@ -3,34 +3,47 @@
 ``--port memory``: the two endpoints alone, no port).
 
 Two serial sockets talk over the master and slave side of one pty
-(``serialsocket.open_pty_pair``), in one process and one trio run on the wall
-clock.  Each run connects, sends ``--size`` bytes of random binary one way,
-reads them all on the other side (checked byte for byte), and closes.  The
-time is from the first ``send_all`` to the last byte read; the report gives
+(``serialsocket.open_pty_pair``) on the wall clock.  The receiving end runs in
+a process of its own, as the other end of a line always does (``--one-process``:
+both ends in one trio run, so on one core, which measures what the two
+together cost).  Each run connects, sends ``--size`` bytes of random binary
+one way, reads them all on the other side (checked by SHA-256), and closes.
+The time is from the first ``send_all`` to the last byte read (both ends read
+``CLOCK_MONOTONIC``, which is one clock for every process); the report gives
 the median of ``--runs`` runs for each packet length (MB/s = 10^6 bytes per
 second of application data).  This is a benchmark, not a test.
+
+Both ends are configured as the netcat configures them (``serialsocket
+listen/connect``): the library's window (31, long sequence numbers), a dense
+encoding offered, the sums offered (they go on only after a loss, so never
+here), the profile from the line (``--profile auto``: a pty and ``socket://``
+are 8N1, so 8-bit clean).
 
 ``--port memory`` hands each endpoint's output straight to the other
 (sans-I/O, no trio, no port) and times the transfer in process CPU time:
 what the ARQ and the codec cost, both sides together, apart from the I/O
 and the machine's other load.
 
-``--profile FILE`` runs one extra transfer per packet length under cProfile
-and writes the statistics (``python -m pstats FILE``).
+``--cprofile FILE`` runs one extra one-process transfer per packet length
+under cProfile and writes the statistics (``python -m pstats FILE``).
 """
 
 from __future__ import annotations
 
 import cProfile
+import hashlib
+import multiprocessing
 import os
 import statistics
 import time
 from collections.abc import AsyncIterator, Sequence
-from contextlib import asynccontextmanager
+from contextlib import AsyncExitStack, asynccontextmanager
+from multiprocessing.connection import Connection
 
 import trio
 
 from serialsocket import (
+    MAX_WINDOW,
     ConnectionRequested,
     Endpoint,
     EndpointConfig,
@@ -41,7 +54,7 @@ from serialsocket import (
     open_port,
     open_pty_pair,
 )
-from serialsocket.packets import PRINTABLE, Encoding
+from serialsocket.packets import EIGHT_BIT_CLEAN, Encoding
 
 __all__ = ["DEFAULT_LENGTHS", "PORTS", "measure", "run_bench_pty"]
 
@@ -59,6 +72,12 @@ PORTS = ("pty", "socket", "loop", "memory")
 ``loop://``, one port that echoes itself, so only raw port I/O (no ARQ: two
 endpoints cannot share one port); two endpoints with no port between them
 (the ARQ's CPU time alone)."""
+
+_CHILD_GRACE = 10.0
+"""Seconds the receiving process has to report and exit after the transfer."""
+
+_SPAWN = multiprocessing.get_context("spawn")
+"""The receiving process starts fresh: a fork would copy trio's state."""
 
 _HANDSHAKE_STEPS = 20
 """Exchanges allowed for the in-memory handshake (it takes two)."""
@@ -134,6 +153,121 @@ async def _transfer(data: bytes, config: EndpointConfig, kind: str = "pty") -> f
     return elapsed
 
 
+def _clock() -> float:
+    """``CLOCK_MONOTONIC``: one clock for every process of the machine, so the
+    sender's start and the receiving process's last byte can be subtracted."""
+    return time.clock_gettime(time.CLOCK_MONOTONIC)
+
+
+async def _receive_all(port_name: str, config: EndpointConfig) -> tuple[int, str, float]:
+    """Open ``port_name``, accept one connection and read until the sender's
+    EOF; returns (bytes, their SHA-256, clock at the last byte)."""
+    digest = hashlib.sha256()
+    count = 0
+    last = _clock()
+    with trio.fail_after(_LIMIT):
+        async with await open_port(port_name) as port, trio.open_nursery() as nursery:
+            server = await accept(port, config, nursery=nursery)
+            while chunk := await server.receive_some():
+                digest.update(chunk)
+                count += len(chunk)
+                last = _clock()
+            await server.aclose()
+            nursery.cancel_scope.cancel()
+    return count, digest.hexdigest(), last
+
+
+def _receiver_process(port_name: str, config: EndpointConfig, report: Connection) -> None:
+    """The receiving end's process: sends ``("ok", bytes, sha256, end)`` or
+    ``("error", message)`` on ``report``."""
+    try:
+        count, digest, end = trio.run(_receive_all, port_name, config)
+    except Exception as exc:  # the parent raises it, in the receiver's words
+        report.send(("error", f"{type(exc).__name__}: {exc}"))
+    else:
+        report.send(("ok", count, digest, end))
+    finally:
+        report.close()
+
+
+@asynccontextmanager
+async def _with_receiver(
+    kind: str, config: EndpointConfig, report: Connection
+) -> AsyncIterator[trio.abc.Stream]:
+    """Start :func:`_receiver_process` on the far end of a ``kind`` pair
+    ("pty" or "socket") and yield this process's end; on exit, wait for the
+    process (at most ``_CHILD_GRACE`` s, then kill it)."""
+    async with AsyncExitStack() as stack:
+        listener: trio.SocketListener | None = None
+        near: trio.abc.Stream
+        if kind == "pty":
+            # The slave stays open here, never read, while the far end opens
+            # it by name: a master whose slave nobody holds reads EIO.
+            near, far = open_pty_pair()
+            await stack.enter_async_context(near)
+            await stack.enter_async_context(far)
+            far_name = far.name
+        else:
+            listener = (await trio.open_tcp_listeners(0, host="127.0.0.1"))[0]
+            await stack.enter_async_context(listener)
+            host, tcp_port = listener.socket.getsockname()[:2]
+            far_name = f"socket://{host}:{tcp_port}"
+        process = _SPAWN.Process(
+            target=_receiver_process, args=(far_name, config, report), daemon=True
+        )
+        process.start()
+        report.close()  # the child's copy is the only writer: its death reads as EOF
+        try:
+            if listener is not None:
+                # (Bounded by the caller's _LIMIT, should the child never connect.)
+                near = await stack.enter_async_context(await listener.accept())
+            yield near
+        finally:
+            with trio.CancelScope(shield=True):
+                await trio.to_thread.run_sync(process.join, _CHILD_GRACE)
+            if process.is_alive():
+                process.kill()
+                process.join()
+
+
+def _read_report(reports: Connection) -> tuple[int, str, float]:
+    """The receiving process's report: (bytes, SHA-256, clock at the last byte)."""
+    try:
+        report = reports.recv() if reports.poll(_CHILD_GRACE) else None
+    except EOFError:
+        report = None
+    if report is None:
+        raise AssertionError("the receiving process ended without a report")
+    if report[0] != "ok":
+        raise AssertionError(f"the receiving process failed: {report[1]}")
+    return report[1], report[2], report[3]
+
+
+async def _transfer_to_process(data: bytes, config: EndpointConfig, kind: str) -> float:
+    """Seconds to move ``data`` to a serial socket in another process over a
+    ``kind`` pair, from the first ``send_all`` to the last byte read there."""
+    reports, report_end = _SPAWN.Pipe(duplex=False)
+    with reports:
+        with trio.fail_after(_LIMIT):
+            async with (
+                _with_receiver(kind, config, report_end) as port,
+                trio.open_nursery() as nursery,
+            ):
+                client = await connect(port, config, nursery=nursery)
+                t0 = _clock()
+                await client.send_all(data)
+                await client.send_eof()
+                await client.aclose()
+                nursery.cancel_scope.cancel()
+        count, digest, end = _read_report(reports)
+    if count != len(data) or digest != hashlib.sha256(data).hexdigest():
+        raise AssertionError(
+            f"SerialSocket delivered {count} bytes of other content than the {len(data)} sent"
+            f" on a clean {kind} line"
+        )
+    return end - t0
+
+
 def _in_memory(data: bytes, config: EndpointConfig) -> float:
     """Process CPU seconds to move ``data`` from one endpoint to another, each
     one's output handed to the other at once (no port, no trio): the client
@@ -178,34 +312,58 @@ def _in_memory(data: bytes, config: EndpointConfig) -> float:
     return elapsed
 
 
+def bench_config(
+    max_len: int, window: int = MAX_WINDOW, encoding: Encoding | None = None, dense: bool = True
+) -> EndpointConfig:
+    """Both ends' configuration: the netcat's (dense, sums, the library's
+    window), at ``max_len`` and ``window``; ``encoding`` None is the
+    profile an 8N1 port chooses, a pty's or ``socket://``'s (8-bit clean)."""
+    return EndpointConfig(
+        max_packet_length=max_len,
+        window=window,
+        dead_after=_DEAD_AFTER,
+        encoding=EIGHT_BIT_CLEAN if encoding is None else encoding,
+        dense=dense,
+        correction=True,
+    )
+
+
 def measure(
     size: int,
     runs: int,
     max_len: int,
-    window: int,
+    window: int = MAX_WINDOW,
     port: str = "pty",
-    encoding: Encoding = PRINTABLE,
+    encoding: Encoding | None = None,
+    *,
+    dense: bool = True,
+    one_process: bool = False,
 ) -> dict[str, object]:
     """Median goodput of ``runs`` transfers of ``size`` bytes with ``max_len``
     packets over ``port`` (one of :data:`PORTS`; ``loop`` is raw port I/O),
-    both sockets configured with ``encoding`` (the printable profile by default;
-    ``EIGHT_BIT_CLEAN`` for what an 8-bit pty allows)."""
+    both ends configured by :func:`bench_config`.  Over ``pty`` and
+    ``socket`` the receiving end runs in a process of its own unless
+    ``one_process``."""
     data = os.urandom(size)
-    config = EndpointConfig(
-        max_packet_length=max_len, window=window, dead_after=_DEAD_AFTER, encoding=encoding
-    )
+    config = bench_config(max_len, window, encoding, dense)
+    processes = 1
     if port == "loop":
         times = [trio.run(_echo, data) for _ in range(runs)]
     elif port == "memory":
         times = [_in_memory(data, config) for _ in range(runs)]
-    else:
+    elif one_process:
         times = [trio.run(_transfer, data, config, port) for _ in range(runs)]
+    else:
+        processes = 2
+        times = [trio.run(_transfer_to_process, data, config, port) for _ in range(runs)]
     median = statistics.median(times)
     return {
         "port": port,
         "arq": port != "loop",
+        "processes": processes,
         "clock": "process" if port == "memory" else "wall",
-        "encoding": "printable" if encoding.printable else "8bit",
+        "encoding": "printable" if config.line_encoding().printable else "8bit",
+        "dense": dense,
         "max_packet_length": max_len,
         "window": window,
         "bytes": size,
@@ -221,15 +379,20 @@ def run_bench_pty(
     size: int = 1 << 20,
     runs: int = 5,
     lengths: Sequence[int] = DEFAULT_LENGTHS,
-    window: int = 16,
-    profile: str | None = None,
+    window: int = MAX_WINDOW,
+    cprofile: str | None = None,
     ports: Sequence[str] = ("pty",),
-    encoding: Encoding = PRINTABLE,
+    encoding: Encoding | None = None,
+    dense: bool = True,
+    one_process: bool = False,
 ) -> dict[str, object]:
     """Run the benchmark for each port kind and packet length; returns the JSON record.
 
-    ``encoding`` is the prefix profile of both sockets (``EIGHT_BIT_CLEAN``:
-    no 8th-bit prefixing, 1.27 instead of 1.78 wire characters per random byte).
+    ``encoding`` is the prefix profile of both ends (None: the line's, 8-bit
+    clean); ``dense`` offers the dense encodings (1.01 wire characters per
+    random byte on an 8-bit line, 1.23 on a printable one; without them 1.27
+    and 1.78).  ``cprofile`` names a file for the statistics of one more
+    one-process transfer per length under cProfile.
     """
     results = []
     for port in ports:
@@ -237,14 +400,13 @@ def run_bench_pty(
             raise ValueError(f"port must be one of {', '.join(PORTS)}, got {port!r}")
         # loop:// moves raw bytes: the packet length does not apply, one row.
         for n in lengths[:1] if port == "loop" else lengths:
-            results.append(measure(size, runs, n, window, port, encoding))
-    if profile is not None:
+            results.append(
+                measure(size, runs, n, window, port, encoding, dense=dense, one_process=one_process)
+            )
+    if cprofile is not None:
         prof = cProfile.Profile()
         data = os.urandom(size)
         for n in lengths:
-            cfg = EndpointConfig(
-                max_packet_length=n, window=window, dead_after=_DEAD_AFTER, encoding=encoding
-            )
-            prof.runcall(trio.run, _transfer, data, cfg, "pty")
-        prof.dump_stats(profile)
+            prof.runcall(trio.run, _transfer, data, bench_config(n, window, encoding, dense), "pty")
+        prof.dump_stats(cprofile)
     return {"benchmark": "pty", "cpus": os.cpu_count(), "results": results}

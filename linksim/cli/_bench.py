@@ -51,7 +51,8 @@ from linksim.bench import (
     standard_grid,
     summarize,
 )
-from serialsocket.packets import DEFAULT_MAX_PACKET_LENGTH
+from serialsocket import MAX_WINDOW
+from serialsocket.packets import DEFAULT_MAX_PACKET_LENGTH, EIGHT_BIT_CLEAN, PRINTABLE, Encoding
 
 from ._args import (
     BAUD,
@@ -69,6 +70,13 @@ from ._args import (
     FloatRange,
     IntRange,
 )
+
+_PTY_PROFILES: dict[str, Encoding | None] = {
+    "auto": None,
+    "8bit": EIGHT_BIT_CLEAN,
+    "printable": PRINTABLE,
+}
+"""``bench pty --profile``, as the netcat's (None: the line's)."""
 
 __all__ = [
     "add_codec_arguments",
@@ -505,7 +513,12 @@ def add_pty_arguments(ap: argparse.ArgumentParser) -> None:
         dest="lengths",
         help="packet length (repeatable; default 128 and 4096)",
     )
-    ap.add_argument("--window", type=WINDOW, default=16, help="window in packets (default 16)")
+    ap.add_argument(
+        "--window",
+        type=WINDOW,
+        default=MAX_WINDOW,
+        help=f"window in packets (default {MAX_WINDOW}, the library's: long sequence numbers)",
+    )
     ap.add_argument(
         "--port",
         choices=PTY_PORTS,
@@ -515,7 +528,28 @@ def add_pty_arguments(ap: argparse.ArgumentParser) -> None:
         "loop: pyserial's loop:// echo, raw port I/O without the ARQ; memory: the two "
         "endpoints with no port, in process CPU time (repeatable)",
     )
-    ap.add_argument("--profile", metavar="FILE", help="also write a cProfile of one run per length")
+    ap.add_argument(
+        "--profile",
+        choices=tuple(_PTY_PROFILES),
+        default="auto",
+        help="what the line carries, as the netcat's --profile: auto (default: the port's "
+        "format; a pty and socket:// are 8N1, so 8bit), 8bit or printable",
+    )
+    ap.add_argument(
+        "--no-dense",
+        dest="dense",
+        action="store_false",
+        help="offer no dense encoding (classic Kermit prefixing), as the netcat's --no-dense",
+    )
+    ap.add_argument(
+        "--one-process",
+        action="store_true",
+        help="run both ends in one process (one trio run, so one core) instead of the "
+        "receiving end in a process of its own: what the two ends cost together",
+    )
+    ap.add_argument(
+        "--cprofile", metavar="FILE", help="also write a cProfile of one one-process run per length"
+    )
     ap.add_argument("--json", action="store_true", help="print one JSON object and nothing else")
 
 
@@ -529,8 +563,11 @@ def pty_main(args: argparse.Namespace) -> int:
         runs=args.runs,
         lengths=args.lengths or PTY_LENGTHS,
         window=args.window,
-        profile=args.profile,
+        cprofile=args.cprofile,
         ports=args.ports or ("pty",),
+        encoding=_PTY_PROFILES[args.profile],
+        dense=args.dense,
+        one_process=args.one_process,
     )
     if args.json:
         print(json.dumps(record))
@@ -552,13 +589,14 @@ def pty_main(args: argparse.Namespace) -> int:
                 f" (median of {r['runs']} x {r['bytes']} bytes)"
             )
             continue
+        ends = "one process" if r["processes"] == 1 else "each end in its own process"
         print(
             f"SerialSocket over {over[r['port']]}, {r['max_packet_length']}-character packets,"
-            f" window {r['window']}: {r['MBps']} MB/s"
-            f" (median of {r['runs']} x {r['bytes']} bytes)"
+            f" window {r['window']}, {r['encoding']}{'' if r['dense'] else ' (no dense)'},"
+            f" {ends}: {r['MBps']} MB/s (median of {r['runs']} x {r['bytes']} bytes)"
         )
-    if args.profile:
-        print(f"profile written to {args.profile} (python -m pstats {args.profile})")
+    if args.cprofile:
+        print(f"profile written to {args.cprofile} (python -m pstats {args.cprofile})")
     return 0
 
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import subprocess
 import sys
 
 import pytest
 
 from linksim.bench import run_bench_pty
+from linksim.bench._pty import _read_report
 from linksim.cli import _bench as bench_cli
-from serialsocket.packets import EIGHT_BIT_CLEAN
+from serialsocket.packets import PRINTABLE
 
 
 def test_bench_pty_json(capsys: pytest.CaptureFixture[str]) -> None:
@@ -101,15 +103,43 @@ def test_bench_pty_in_memory(capsys: pytest.CaptureFixture[str]) -> None:
     assert row["MBps"] > 0
 
 
-def test_bench_pty_eight_bit_profile() -> None:
-    # Both sockets take the profile; the record names it (the 4096 run is
-    # the same code at another length, so one length keeps this fast).
-    record = run_bench_pty(size=5000, runs=1, lengths=(128,), encoding=EIGHT_BIT_CLEAN)
+def test_bench_pty_profiles_and_dense() -> None:
+    # Both ends take the profile; the record names it (the 4096 run is the
+    # same code at another length, so one length keeps this fast).  Left to
+    # the line, a pty is 8N1: 8-bit clean, as the netcat would choose.
+    record = run_bench_pty(
+        size=5000, runs=1, lengths=(128,), encoding=PRINTABLE, dense=False, one_process=True
+    )
     results = record["results"]
     assert isinstance(results, list)
-    assert [(r["encoding"], r["max_packet_length"], r["bytes"]) for r in results] == [
-        ("8bit", 128, 5000)
+    assert [(r["encoding"], r["dense"], r["processes"]) for r in results] == [
+        ("printable", False, 1)
     ]
     default = run_bench_pty(size=5000, runs=1, lengths=(128,))["results"]
     assert isinstance(default, list)
-    assert default[0]["encoding"] == "printable"
+    assert [(r["encoding"], r["dense"], r["processes"], r["window"]) for r in default] == [
+        ("8bit", True, 2, 31)
+    ]
+
+
+def test_bench_pty_one_process_option(capsys: pytest.CaptureFixture[str]) -> None:
+    ap = argparse.ArgumentParser()
+    bench_cli.add_pty_arguments(ap)
+    args = ap.parse_args(
+        "--size 3000 --runs 1 --max-len 128 --one-process --profile printable --no-dense".split()
+    )
+    assert bench_cli.pty_main(args) == 0
+    assert (
+        "SerialSocket over a raw pty, 128-character packets, window 31, printable (no dense),"
+        " one process:" in capsys.readouterr().out
+    )
+
+
+def test_the_receiving_process_reports_its_failure_in_its_own_words() -> None:
+    reports, end = multiprocessing.Pipe(duplex=False)
+    end.send(("error", "LinkDeadError: no packet for 60 s"))
+    with pytest.raises(AssertionError, match="the receiving process failed: LinkDeadError"):
+        _read_report(reports)
+    end.close()
+    with pytest.raises(AssertionError, match="ended without a report"):
+        _read_report(reports)
