@@ -979,12 +979,14 @@ class ARQMachine(RuleBasedStateMachine):
     @invariant()
     def sums_only_when_agreed(self) -> None:
         """Only a side that agreed on corrected data packets (PROTOCOL.md 15)
-        sends ``d`` packets, and only a side that agreed repairs any."""
+        sends ``d`` or repair packets, and only a side that agreed repairs
+        any or answers a repair packet."""
         for side in SIDES:
             st_ = self.ep[side].statistics()
             if not st_.correction:
                 assert st_.corrected_sent == 0, (side, st_)
                 assert st_.repaired == 0, (side, st_)
+                assert st_.repairs_sent == st_.repairs_failed == 0, (side, st_)
             assert st_.repaired <= st_.packets_received, (side, st_)
 
     @invariant()

@@ -59,9 +59,10 @@ with instrumented(__name__ == "__main__"):
         Packet,
         build_corrected,
         build_packet,
+        repair_field,
     )
 
-_TYPES = "DYNZEISBFXAR?"
+_TYPES = "DYNZEISBFXARr?"
 _TIMER_SPIN_LIMIT = 64
 """Consecutive timer firings at one instant before it counts as a spin."""
 
@@ -157,6 +158,13 @@ def one_input(data: bytes) -> None:
                     damaged = bytearray(build_corrected(seq, payload, check))
                     damaged[1 + (how >> 1) % (len(damaged) - 2)] = r.byte() or 2
                     wire = bytes(damaged)
+                elif how & 2:  # damaged, then the repair packet for it (PROTOCOL.md 15.6)
+                    damaged = bytearray(wire)
+                    damaged[1 + (how >> 2) % (len(damaged) - 2)] = r.byte() or 2
+                    b.receive_data(bytes(damaged), now)
+                    field = repair_field(wire[:-1], int(check))
+                    head = payload[:2] if long_seq else b""
+                    wire = build_packet(Packet(seq=seq, type="r", data=head + field), check)
             b.receive_data(wire, now)
         elif op == 2:  # raw bytes on the line
             b.receive_data(r.take(r.byte()), now)

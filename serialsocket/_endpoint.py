@@ -65,7 +65,14 @@ from ._expedited import (
     ExpeditedReceiver,
     ExpeditedSender,
 )
-from ._fec import CORRECTED_TYPE, build_corrected, trailer_length
+from ._fec import (
+    CORRECTED_TYPE,
+    REPAIR_TYPE,
+    apply_repair,
+    build_corrected,
+    repair_field,
+    trailer_length,
+)
 from ._latest import (
     LATEST,
     LATEST_ACK,
@@ -158,6 +165,21 @@ window) in use -- a few hundred on a steady link; cleared when full."""
 
 _ERROR_TEXT_MAX = 80
 """E-packet reasons are cut to this many characters: one normal packet, readable in a trace."""
+
+DAMAGED_KEPT = 4
+"""Damaged packets a receiver keeps for a repair packet to mend (PROTOCOL.md
+15.6): the repair comes a round trip after the damage, and a window holds
+more packets than that only on a line so noisy that most would not mend."""
+
+REPAIR_TRIES = 2
+"""Held packets one repair packet may try: each try is one more chance for
+damage the check misses (PROTOCOL.md 15.4), so few; the one whose SEQ
+character matches first."""
+
+REPAIR_MIN_LENGTH = 96
+"""The shortest data packet (MARK through CHECK) whose first resend is a
+repair packet: the repair is 15-30 characters, and when it mends nothing
+the packet waits a round trip more."""
 
 DOUBLE_FROM_COPY = 3
 """The copy of a packet from which a resend goes out twice on a long line:
@@ -356,7 +378,15 @@ class EndpointStatistics:
     """Data packets we sent with sums (``d``; first sends and resends)."""
     repaired: int = 0
     """Packets from the peer whose check failed and that their sums repaired
-    (each one a resend saved)."""
+    (each one a resend saved): ``d`` packets, and ``D`` packets mended by a
+    repair packet (PROTOCOL.md 15.6)."""
+    repairs_sent: int = 0
+    """Repair packets we sent (``r``: the sums of a ``D`` packet the peer
+    lost, in place of resending it whole; PROTOCOL.md 15.6)."""
+    repairs_failed: int = 0
+    """Repair packets from the peer that mended nothing we held (the packet
+    was lost whole, or damaged beyond the sums): each one answered with a
+    NAK, and the packet comes again whole."""
     packet_length: int = 0
     """The length (MARK through CHECK) new data packets are cut to: measured
     from the losses unless ``max_packet_length`` fixes it (PROTOCOL.md 4.7)."""
@@ -531,6 +561,9 @@ class Endpoint:
                 "flight_refused",
                 "flight_received",
                 "corrected_sent",
+                "repairs_sent",
+                "repairs_applied",
+                "repairs_failed",
             ),
             0,
         )
@@ -923,6 +956,8 @@ class Endpoint:
                 if self._close_deadline != math.inf:
                     self._note_close_progress(now)
             elif event.reason in _DAMAGE and self._state is _ESTABLISHED:
+                if event.damaged is not None:
+                    self._damaged.append(event.damaged)  # a repair packet may mend it
                 nak = self._receiver.gap_to_nak(now, self._rtt.timeout())
                 if nak is not None:
                     self._queue_nak(nak)
@@ -1114,7 +1149,9 @@ class Endpoint:
             flight_received=c["flight_received"],
             correction=self._parser.correction,
             corrected_sent=c["corrected_sent"],
-            repaired=ps.repaired,
+            repaired=ps.repaired + c["repairs_applied"],
+            repairs_sent=c["repairs_sent"],
+            repairs_failed=c["repairs_failed"],
         )
 
     # -- internals: connection ------------------------------------------------------
@@ -1134,6 +1171,7 @@ class Endpoint:
         self._parser.reset()
         self._parser.check = BlockCheck.CRC16
         self._parser.correction = False
+        self._damaged: deque[bytes] = deque(maxlen=DAMAGED_KEPT)
         self._parser.max_length = self._max_length
         self._send_check = BlockCheck.CRC16
         self._encoding = PRINTABLE
@@ -1727,6 +1765,9 @@ class Endpoint:
                     # every rate sample (no hints: never measured).
                     self._rate.reverse(now)
                 self._on_data(split[0], split[1], ptype == _T_EOF, now)
+        elif ptype == REPAIR_TYPE and self._correction:
+            if self._state is _ESTABLISHED or self._state in CONNECTED:
+                self._on_repair(packet, now)
         elif ptype == _T_ACK:
             if len(packet.data) >= _INIT_MIN_FIELD:
                 self._on_init_answer(packet, now)
@@ -1782,6 +1823,43 @@ class Endpoint:
         the window the user wants; long numbers only lift the ceiling)."""
         cfg = self.config
         return cfg.long_window if cfg.needs_long_window() else None
+
+    def _on_repair(self, packet: Packet, now: float) -> None:
+        """A repair packet (PROTOCOL.md 15.6): mend the damaged packet we
+        hold that it is for and take it as if it had come whole; with none
+        to mend (it was lost whole, or damaged beyond the sums), NAK it at
+        once so that it comes again whole (or ACK it, received already)."""
+        split = self._split_seq(packet)
+        if split is None:
+            return
+        seq, field = split
+        check = self._parser.check
+        # The damaged packets of the repaired length, the one whose SEQ
+        # character is the repair's first; at most REPAIR_TRIES of them (each
+        # a try of the check: PROTOCOL.md 15.4).
+        length = (field[0] - 32) << 6 | (field[1] - 32) if len(field) >= 2 else -1
+        held = [i for i in range(len(self._damaged)) if len(self._damaged[i]) == length]
+        held.sort(key=lambda i: (self._damaged[i][2] != packet.seq + 32, -i))
+        for i in held[:REPAIR_TRIES]:
+            fixed = apply_repair(self._damaged[i], field, check)
+            if fixed is None or fixed[3] != _DATA_C or not 32 <= fixed[2] <= 95:
+                continue
+            head = EXTENDED_HEADER_LENGTH if fixed[1] == 32 else NORMAL_HEADER_LENGTH
+            mended = Packet(
+                seq=fixed[2] - 32, type=PacketType.DATA, data=fixed[head : len(fixed) - int(check)]
+            )
+            if (again := self._split_seq(mended)) is None or again[0] != seq:
+                continue
+            del self._damaged[i]
+            self._counters["repairs_applied"] += 1
+            self._on_packet(mended, now)
+            return
+        self._counters["repairs_failed"] += 1
+        missing = self._receiver.missing(seq)
+        if missing:
+            self._queue_nak(seq)
+        elif missing is not None:
+            self._queue_ack(seq)
 
     def _split_seq(self, packet: Packet) -> tuple[int, bytes] | None:
         """``(sequence number on the wire, the rest of the data field)``.
@@ -2407,7 +2485,6 @@ class Endpoint:
         while s.has_retransmit() and self._pacer.has_room(now):
             pkt = s.pop_retransmit()
             assert pkt is not None
-            self._counters["retransmissions"] += 1
             preempted = pkt.seq in self._preempted
             if preempted:
                 # Cut by an expedited packet's drop, not lost: the packet
@@ -2416,6 +2493,13 @@ class Endpoint:
             else:
                 self._length.lost()
                 self._adapt_length(clean=False)
+            repair = None if preempted else self._repair_for(pkt)
+            if repair is not None:
+                self._length.sent(len(repair))
+                self._transmit(pkt, now, timeout, out, wire=repair)
+                continue
+            self._counters["retransmissions"] += 1  # (whole copies: repairs count apart)
+            if not preempted:
                 self._add_sums(pkt)
                 self._length.sent(len(pkt.wire), corrected=pkt.wire[3] == _CORRECTED_C)
             self._transmit(pkt, now, timeout, out)
@@ -2501,6 +2585,28 @@ class Endpoint:
         del s.queue[:taken]
         return took
 
+    def _repair_for(self, pkt: Outstanding) -> bytes | None:
+        """The repair packet to send in place of resending ``pkt`` whole, or
+        None (PROTOCOL.md 15.6): only for the first resend of a ``D`` packet
+        of at least :data:`REPAIR_MIN_LENGTH` characters, with sums agreed
+        and more new data waiting (the line stays busy while the repair's
+        answer comes; at the end of a transfer a failed repair would idle
+        it for a round trip)."""
+        wire = pkt.wire
+        if (
+            not self._correction
+            or pkt.repair_sent
+            or wire[3] != _DATA_C
+            or len(wire) - 1 < REPAIR_MIN_LENGTH
+            or not self._sender.has_new_data()
+        ):
+            return None
+        pkt.repair_sent = True
+        seq, head = self._seq_fields(pkt.seq)
+        field = head + repair_field(wire[:-1], int(self._send_check))
+        self._counters["repairs_sent"] += 1
+        return build_packet(Packet(seq=seq, type=REPAIR_TYPE, data=field), self._send_check)
+
     def _add_sums(self, pkt: Outstanding) -> None:
         """A data packet lost before the sums went on is resent as a ``d``
         packet with the same data when sums pay at its length now and it
@@ -2554,11 +2660,22 @@ class Endpoint:
             self._counters["idle_copies"] += 1
             self._transmit(pkt, now, timeout, out)
 
-    def _transmit(self, pkt: Outstanding, now: float, timeout: float, out: list[bytes]) -> None:
-        out.append(pkt.wire)
+    def _transmit(
+        self,
+        pkt: Outstanding,
+        now: float,
+        timeout: float,
+        out: list[bytes],
+        *,
+        wire: bytes | None = None,
+    ) -> None:
+        """Hand a copy of ``pkt`` to the line (``wire``: a repair packet in
+        its place) and arm its timer."""
+        sent = pkt.wire if wire is None else wire
+        out.append(sent)
         pkt.transmissions += 1
         self._sender.note_sent(pkt)
-        pkt.done_at = self._account(pkt.wire, now)
+        pkt.done_at = self._account(sent, now)
         if pkt.transmissions == 1:
             pkt.mark = self._rate.mark(now)
             last = self._last_first

@@ -34,10 +34,13 @@ from ._wire import CR, EXTENDED_HEADER_LENGTH, MARK, NORMAL_HEADER_LENGTH
 __all__ = [
     "BLOCK_SPAN",
     "CORRECTED_TYPE",
+    "REPAIR_TYPE",
     "TRAILER_PER_BLOCK",
+    "apply_repair",
     "blocks",
     "build_corrected",
     "repair",
+    "repair_field",
     "survival",
     "trailer",
     "trailer_length",
@@ -45,6 +48,10 @@ __all__ = [
 
 CORRECTED_TYPE = "d"
 """The type letter of a corrected data packet (a ``D`` with sums behind its data)."""
+
+REPAIR_TYPE = "r"
+"""The type letter of a repair packet: the sums of a ``D`` packet sent
+without them, for a receiver that holds it damaged (PROTOCOL.md 15.6)."""
 
 BLOCK_SPAN = 255
 """The most covered characters in one block: ``alpha`` has order 255, so the
@@ -197,6 +204,52 @@ def _fix(covered: bytes, trail: bytes, m: int, header: int) -> bytes | None:
             out = bytearray(covered)
         out[at] = value
     return None if out is None else bytes(out)
+
+
+def repair_blocks(total_length: int, check_length: int) -> int:
+    """Blocks of the sums a repair packet carries for a packet of
+    ``total_length`` characters (MARK through CHECK): the fewest ``m >= 1``
+    whose ``255 m`` hold its covered characters, ``total_length - 1 -
+    check_length`` (no sums of its own among them)."""
+    return max(1, -(-(total_length - 1 - check_length) // BLOCK_SPAN))
+
+
+def repair_field(packet: bytes, check_length: int) -> bytes:
+    """A repair packet's data after any long sequence characters, for the
+    data packet ``packet`` (MARK through CHECK, as it was sent): its length
+    in two characters, ``tochar(P >> 6) tochar(P & 63)``, then the sums of
+    its covered characters (LEN through the last data character) in
+    :func:`repair_blocks` blocks."""
+    total = len(packet)
+    m = repair_blocks(total, check_length)
+    return bytes((32 + (total >> 6), 32 + (total & 63))) + trailer(
+        packet[1 : total - check_length], m
+    )
+
+
+def apply_repair(damaged: bytes, field: bytes, check: BlockCheck) -> bytes | None:
+    """``damaged`` (a packet MARK through CHECK whose check failed) repaired
+    by the sums of a repair packet's ``field`` (:func:`repair_field`), or
+    None: not the length the sums are for, nothing they can repair, or a
+    repair the check still refuses.  As :func:`repair`, never LEN, TYPE or
+    the extended header, never SEQ out of 0..63 or a character to a MARK;
+    damage to the check itself is not repaired either (the sums all agree:
+    nothing to correct)."""
+    if len(field) < 2 or not (32 <= field[0] < 96 and 32 <= field[1] < 96):
+        return None
+    total = (field[0] - 32) << 6 | (field[1] - 32)
+    k = int(check)
+    head = EXTENDED_HEADER_LENGTH if total > 1 and damaged[1:2] == b" " else NORMAL_HEADER_LENGTH
+    if total != len(damaged) or total - k < head or k < 3:
+        return None
+    m = repair_blocks(total, k)
+    if len(field) != 2 + TRAILER_PER_BLOCK * m:
+        return None
+    got = damaged[total - k :]
+    fixed = _fix(damaged[1 : total - k], field[2:], m, head - 1)
+    if fixed is None or check_chars(check, fixed) != got:
+        return None
+    return b"\x01" + fixed + got
 
 
 def survival(length: int, q: float, check_length: int) -> float:

@@ -223,9 +223,12 @@ class _Tally:
             "naks_sent": st.naks_sent,
             "check_failures": st.check_failures,
             # Corrected data packets (PROTOCOL.md 15): ours sent with sums,
-            # and the peer's that failed their check and the sums repaired.
+            # and the peer's that failed their check and the sums repaired;
+            # repair packets (15.6) we sent, and the peer's that mended nothing.
             "corrected_sent": st.corrected_sent,
             "repaired": st.repaired,
+            "repairs_sent": st.repairs_sent,
+            "repairs_failed": st.repairs_failed,
             "garbage_bytes": st.garbage_bytes,
             "smoothed_rtt_s": None if st.smoothed_rtt is None else round(st.smoothed_rtt, 3),
             "window": st.effective_window,

@@ -29,7 +29,7 @@ follow it.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ._checks import _CRC16_FUN, _CRC16_TABLE, BlockCheck, check_chars
 from ._errors import LocalProtocolError
@@ -130,6 +130,9 @@ class PacketRejected:
         seq: the sequence number the damaged packet claimed, if it got that
             far (untrustworthy by definition; for traces only).
         type: likewise, its type letter.
+        damaged: with ``correction`` on, a packet whose check failed, whole
+            (MARK through CHECK): a repair packet may still mend it
+            (PROTOCOL.md 15.6); else None.
     """
 
     reason: RejectReason
@@ -137,6 +140,7 @@ class PacketRejected:
     length: int
     seq: int | None = None
     type: str | None = None
+    damaged: bytes | None = None
 
 
 ParserEvent = PacketReceived | PacketRejected
@@ -546,7 +550,10 @@ class PacketParser:
         self._garbage += upto
         self._discarding = True
         self._resyncs += 1
-        return self._event(reason, raw[:_SAMPLE], upto, seq=seq, ptype=ptype)
+        event = self._event(reason, raw[:_SAMPLE], upto, seq=seq, ptype=ptype)
+        if reason is RejectReason.BAD_CHECK and self.correction:
+            return replace(event, damaged=bytes(raw))
+        return event
 
     def _event(
         self,

@@ -137,6 +137,17 @@ class Receiver:
             arrival.nak = self.gap_to_nak(now, nak_after, upto=seq)
         return arrival
 
+    def missing(self, seq_mod: int) -> bool | None:
+        """Whether the packet with wire sequence number ``seq_mod`` is in
+        the window and not received yet (True), received already (False),
+        or outside the window (None)."""
+        kind, seq = self._resolve(seq_mod)
+        if kind == "old":
+            return False
+        if kind == "outside" or (self.eof and seq >= self.expected):
+            return None
+        return seq not in self.buffered
+
     def _deliver(self, arrival: Arrival) -> None:
         while self.expected in self.buffered:
             item = self.buffered.pop(self.expected)

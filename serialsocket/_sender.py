@@ -64,6 +64,8 @@ class Outstanding:
         sent_index: when its last copy was handed to the line, as a count
             of all copies handed so far (:meth:`Sender.note_sent`).
         first_index: the same for its first copy.
+        repair_sent: a repair packet went in place of a resend
+            (PROTOCOL.md 15.6); the next resend is whole.
     """
 
     seq: int
@@ -78,6 +80,7 @@ class Outstanding:
     copies: int = 0
     sent_index: int = 0
     first_index: int = 0
+    repair_sent: bool = False
 
 
 class Sender:

@@ -23,7 +23,9 @@ declared unsafe bytes such as :data:`XON_XOFF`) and :class:`Radix91Encoding`
 Corrected data packets (negotiated likewise, PROTOCOL.md section 15):
 :func:`build_corrected` builds a ``d`` packet, a ``D`` whose data is
 followed by sums that let a :class:`PacketParser` with ``correction`` on
-repair one damaged character per block of 255.
+repair one damaged character per block of 255; :func:`repair_field` the
+data of a repair packet (``r``, 15.6), the sums of a ``D`` sent without
+them, which a receiver uses on the damaged copy it kept.
 
 Parsing: :class:`PacketParser` takes any bytes, line noise included, and
 yields :data:`ParserEvent` s, :class:`PacketReceived` or
@@ -47,6 +49,7 @@ from ._encoding import EIGHT_BIT_CLEAN as EIGHT_BIT_CLEAN
 from ._encoding import PRINTABLE as PRINTABLE
 from ._encoding import Encoding as Encoding
 from ._fec import build_corrected as build_corrected
+from ._fec import repair_field as repair_field
 from ._packet import Packet as Packet
 from ._packet import build_packet as build_packet
 from ._packet import data_capacity as data_capacity
@@ -95,4 +98,5 @@ __all__ = [
     "crc32_ieee",
     "data_capacity",
     "packet_length",
+    "repair_field",
 ]

@@ -10,9 +10,18 @@ import pytest
 
 from linksim.bench._transfer import simulate
 from serialsocket import Endpoint, EndpointConfig
-from serialsocket._fec import blocks, build_corrected, repair, survival, trailer_length
+from serialsocket._fec import (
+    apply_repair,
+    blocks,
+    build_corrected,
+    repair,
+    repair_field,
+    survival,
+    trailer_length,
+)
 from serialsocket._length import LengthChooser
 from serialsocket._params import negotiate
+from serialsocket._wire import PacketType
 from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
     BlockCheck,
@@ -24,6 +33,8 @@ from serialsocket.packets import (
     build_packet,
     data_capacity,
 )
+
+from .simlink import Filter
 
 CRCS = (BlockCheck.CRC16, BlockCheck.CRC32)
 
@@ -264,11 +275,12 @@ def test_a_noisy_line_delivers_exactly_with_fewer_resends() -> None:
 
 
 def test_a_packet_lost_before_the_sums_went_on_is_resent_with_them() -> None:
-    """Packets 2-5 are lost once each: the losses turn the sums on, and the
-    resends after that go as ``d`` packets with the same data (a
-    513-character ``D`` resent as it was survives 1e-3 six times in ten: one
-    was lost five times running, each a timeout).  The first loss alone
-    does not make sums pay at 128 characters: packet 2 goes again as it was."""
+    """Packets 2-5 are lost whole, once each.  The first resend of each is a
+    repair packet (PROTOCOL.md 15.6), which finds nothing to mend at the
+    receiver (it never saw them): each is NAKed at once, and by then the
+    losses have turned the sums on, so the whole resends go as ``d`` packets
+    with the same data (a 513-character ``D`` resent as it was survives 1e-3
+    six times in ten: one was lost five times running, each a timeout)."""
     from dataclasses import replace
 
     from .simlink import MOON_HINTS, QueuedRun, drop_nth
@@ -280,19 +292,27 @@ def test_a_packet_lost_before_the_sums_went_on_is_resent_with_them() -> None:
     run = QueuedRun(payload, cfg, cfg, [drop_nth(b"D", {2, 3, 4, 5}, "ab")])
     got, _ = run.read_all()
     assert got == payload
-    sent = run.link.sent["ab"]
-    first = {p[2]: p for _, p in sent if p[3:4] == b"D"}
-    again = [p for _, p in sent if p[3:4] == b"d" and p[2] in first]
-    assert sorted(p[2] - 32 for p in again) == [3, 4, 5]
+    sent = [p for _, p in run.link.sent["ab"]][:64]  # (before SEQ wraps)
+    first = {p[2]: p for p in sent if p[3:4] == b"D"}
+    repairs = [p for p in sent if p[3:4] == b"r"]
+    assert [p[2] - 32 for p in repairs] == [2, 3, 4, 5]
+    for wire in repairs:
+        plain = first[wire[2]]
+        head = 7 if plain[1] == 32 else 4
+        assert wire[4:-4].endswith(repair_field(plain[:-1], 3))
+        assert len(wire) < 20 < len(plain)
+    again = [p for p in sent if p[3:4] == b"d" and p[2] in first and p[2] - 32 <= 5]
+    assert sorted(p[2] - 32 for p in again) == [2, 3, 4, 5]
     for wire in again:
         plain = first[wire[2]]
         head = 7 if plain[1] == 32 else 4
         # The same data, then the sums, a new check: a longer packet.
         assert wire[head : len(plain) - 4] == plain[head:-4]
         assert len(wire) > len(plain)
-    assert [p[3:4] for _, p in sent if p[2] - 32 == 2 and p[3:4] in b"Dd"] == [b"D", b"D"]
-    st = run.a.statistics()
-    assert st.retransmissions == 4
+    assert run.a.statistics().retransmissions == 4  # (whole copies only)
+    assert run.a.statistics().repairs_sent == 4
+    assert run.b.statistics().repairs_failed == 4
+    assert run.b.statistics().repaired == 0
 
 
 def test_a_short_packet_resent_with_the_sums_agreed() -> None:
@@ -316,3 +336,121 @@ def test_a_short_packet_resent_with_the_sums_agreed() -> None:
 
     link.run_until(arrived)
     assert a.statistics().retransmissions == 1
+
+
+def _plain(seq: int, data: bytes) -> bytes:
+    """A ``D`` packet under CRC-16, MARK through CHECK (no CR)."""
+    return build_packet(Packet(seq=seq, type=PacketType.DATA, data=data), BlockCheck.CRC16)[:-1]
+
+
+def test_a_repair_packet_mends_one_damaged_character_per_block() -> None:
+    rng = random.Random(21)
+    for n in (1, 80, 91, 300, 700, 1000):
+        plain = _plain(n % 64, bytes(rng.randint(33, 126) for _ in range(n)))
+        field = repair_field(plain, 3)
+        total = len(plain)
+        assert (field[0] - 32) << 6 | (field[1] - 32) == total
+        m = -(-(total - 4) // 255)
+        assert len(field) == 2 + 3 * m
+        head = 7 if plain[1] == 32 else 4
+        for at in (2, head, total // 2, total - 4):  # SEQ, the data, its last character
+            damaged = bytearray(plain)
+            damaged[at] ^= 0x21
+            assert apply_repair(bytes(damaged), field, BlockCheck.CRC16) == plain, (n, at)
+        assert apply_repair(plain[:-1], field, BlockCheck.CRC16) is None  # another length
+        in_check = bytearray(plain)
+        in_check[-1] ^= 0x01  # the sums all agree: nothing to mend
+        assert apply_repair(bytes(in_check), field, BlockCheck.CRC16) is None
+        twice = bytearray(plain)
+        twice[head] ^= 0x21
+        twice[head + m] ^= 0x12  # the same block twice: refused
+        assert apply_repair(bytes(twice), field, BlockCheck.CRC16) is None
+        length = bytearray(plain)
+        length[1] ^= 0x01  # LEN is never mended
+        assert apply_repair(bytes(length), field, BlockCheck.CRC16) is None
+    assert apply_repair(plain, b"", BlockCheck.CRC16) is None
+    assert apply_repair(plain, b"\x00\x00", BlockCheck.CRC16) is None
+    assert apply_repair(plain, field, BlockCheck.SUM6) is None  # only under a CRC
+
+
+def damage_nth(kind: bytes, which: set[int], direction: str, at: int) -> Filter:
+    """A filter damaging character ``at`` of the packets of type ``kind``
+    numbered ``which`` (from 1) in ``direction``."""
+    seen = 0
+
+    def f(d: str, pkt: bytes, now: float) -> list[bytes]:
+        nonlocal seen
+        if d == direction and pkt[3:4] == kind:
+            seen += 1
+            if seen in which:
+                hit = bytearray(pkt)
+                hit[min(at, len(hit) - 6)] ^= 0x40
+                return [bytes(hit)]
+        return [pkt]
+
+    return f
+
+
+def test_a_damaged_data_packet_is_mended_by_a_repair_packet() -> None:
+    """Packets 2-5 arrive with one character damaged: the receiver keeps
+    them, the sender answers each loss with a 15-character repair packet
+    instead of the packet again, and the receiver takes each packet mended,
+    exactly as it was sent: no whole resend at all."""
+    from dataclasses import replace
+
+    from .simlink import MOON_HINTS, QueuedRun
+
+    cfg = replace(MOON_HINTS, correction=True, max_packet_time=None)
+    payload = random.Random(9).randbytes(12_000)
+    run = QueuedRun(payload, cfg, cfg, [damage_nth(b"D", {2, 3, 4, 5}, "ab", 40)])
+    got, _ = run.read_all()
+    assert got == payload
+    sent = [p for _, p in run.link.sent["ab"]][:64]
+    assert [p[2] - 32 for p in sent if p[3:4] == b"r"] == [2, 3, 4, 5]
+    a, b = run.a.statistics(), run.b.statistics()
+    assert (a.repairs_sent, a.retransmissions) == (4, 0)
+    assert (b.repaired, b.repairs_failed) == (4, 0)
+    assert b.duplicates_received == 0
+
+
+def test_no_repair_packet_without_the_sums_agreed_or_at_the_end() -> None:
+    """Without sums agreed a damaged packet is resent whole; with them, the
+    last packet of a transfer too (nothing new keeps the line busy while a
+    repair's answer comes: a failed one would idle it a round trip)."""
+    from dataclasses import replace
+
+    from .simlink import MOON_HINTS, QueuedRun
+
+    payload = random.Random(4).randbytes(3000)
+    plain = replace(MOON_HINTS, max_packet_time=None)
+    run = QueuedRun(payload, plain, plain, [damage_nth(b"D", {2}, "ab", 40)])
+    assert run.read_all()[0] == payload
+    assert (run.a.statistics().repairs_sent, run.a.statistics().retransmissions) == (0, 1)
+    cfg = replace(plain, correction=True)
+    last = payload[:300]
+    run = QueuedRun(last, cfg, cfg, [damage_nth(b"D", {1}, "ab", 40)])
+    assert run.read_all()[0] == last
+    assert (run.a.statistics().repairs_sent, run.a.statistics().retransmissions) == (0, 1)
+
+
+def test_a_repair_for_a_packet_never_held_is_nakked_or_acked_at_once() -> None:
+    """The receiver's side alone: a repair packet it cannot use is answered
+    at once, a NAK for a packet still missing, an ACK for one it has."""
+    from dataclasses import replace
+
+    from .simlink import MOON_HINTS, connected_pair
+
+    cfg = replace(MOON_HINTS, correction=True)
+    _, b, link = connected_pair(cfg, cfg)
+    assert b.statistics().correction
+    seq, head = b._seq_fields(5)
+    forged = build_packet(
+        Packet(seq=seq, type="r", data=head + repair_field(_plain(5, b"hello" * 30), 3)),
+        BlockCheck.CRC16,
+    )
+    b.receive_data(forged, link.now)
+    out = b.data_to_send(link.now)
+    assert out[3:4] == b"N"
+    assert out[2] - 32 == seq
+    assert b.statistics().repairs_failed == 1
+    assert b.statistics().repaired == 0
