@@ -34,6 +34,7 @@ from ._wire import CR, EXTENDED_HEADER_LENGTH, MARK, NORMAL_HEADER_LENGTH
 __all__ = [
     "BLOCK_SPAN",
     "CORRECTED_TYPE",
+    "REPAIR_MAX_LENGTH",
     "REPAIR_TYPE",
     "TRAILER_PER_BLOCK",
     "apply_repair",
@@ -52,6 +53,10 @@ CORRECTED_TYPE = "d"
 REPAIR_TYPE = "r"
 """The type letter of a repair packet: the sums of a ``D`` packet sent
 without them, for a receiver that holds it damaged (PROTOCOL.md 15.6)."""
+
+REPAIR_MAX_LENGTH = 4095
+"""The longest packet a repair packet can name (its length in two
+characters of six bits); a longer one is resent whole."""
 
 BLOCK_SPAN = 255
 """The most covered characters in one block: ``alpha`` has order 255, so the
@@ -219,8 +224,14 @@ def repair_field(packet: bytes, check_length: int) -> bytes:
     data packet ``packet`` (MARK through CHECK, as it was sent): its length
     in two characters, ``tochar(P >> 6) tochar(P & 63)``, then the sums of
     its covered characters (LEN through the last data character) in
-    :func:`repair_blocks` blocks."""
+    :func:`repair_blocks` blocks.
+
+    Raises:
+        ValueError: ``packet`` is longer than :data:`REPAIR_MAX_LENGTH`.
+    """
     total = len(packet)
+    if total > REPAIR_MAX_LENGTH:
+        raise ValueError(f"a repair packet names lengths up to {REPAIR_MAX_LENGTH}, not {total}")
     m = repair_blocks(total, check_length)
     return bytes((32 + (total >> 6), 32 + (total & 63))) + trailer(
         packet[1 : total - check_length], m

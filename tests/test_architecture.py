@@ -174,6 +174,7 @@ def test_public_names_are_pinned() -> None:
             "crc32_ieee",
             "data_capacity",
             "packet_length",
+            "repair_field",
         ]
     )
     assert sorted(kermit.__all__) == sorted(

@@ -413,10 +413,11 @@ def test_a_damaged_data_packet_is_mended_by_a_repair_packet() -> None:
     assert b.duplicates_received == 0
 
 
-def test_no_repair_packet_without_the_sums_agreed_or_at_the_end() -> None:
-    """Without sums agreed a damaged packet is resent whole; with them, the
-    last packet of a transfer too (nothing new keeps the line busy while a
-    repair's answer comes: a failed one would idle it a round trip)."""
+def test_no_repair_packet_without_the_sums_agreed_and_two_at_the_end() -> None:
+    """Without sums agreed a damaged packet is resent whole.  With them, the
+    last packet of a transfer is repaired too, by two copies of its repair
+    (nothing sent after it could show one lost before its timeout); the
+    second finds the packet mended and is answered with an ACK."""
     from dataclasses import replace
 
     from .simlink import MOON_HINTS, QueuedRun
@@ -430,7 +431,10 @@ def test_no_repair_packet_without_the_sums_agreed_or_at_the_end() -> None:
     last = payload[:300]
     run = QueuedRun(last, cfg, cfg, [damage_nth(b"D", {1}, "ab", 40)])
     assert run.read_all()[0] == last
-    assert (run.a.statistics().repairs_sent, run.a.statistics().retransmissions) == (0, 1)
+    assert [p[3:4] for _, p in run.link.sent["ab"]].count(b"r") == 2
+    a, b = run.a.statistics(), run.b.statistics()
+    assert (a.repairs_sent, a.retransmissions) == (1, 0)
+    assert (b.repaired, b.repairs_failed) == (1, 0)
 
 
 def test_a_repair_for_a_packet_never_held_is_nakked_or_acked_at_once() -> None:
@@ -454,3 +458,18 @@ def test_a_repair_for_a_packet_never_held_is_nakked_or_acked_at_once() -> None:
     assert out[2] - 32 == seq
     assert b.statistics().repairs_failed == 1
     assert b.statistics().repaired == 0
+
+
+def test_a_packet_longer_than_a_repair_can_name_is_resent_whole() -> None:
+    with pytest.raises(ValueError, match="up to 4095"):
+        repair_field(_plain(1, b"x" * 4100), 3)
+    from dataclasses import replace
+
+    from .simlink import MOON_HINTS, QueuedRun
+
+    cfg = replace(MOON_HINTS, correction=True, max_packet_length=6000, max_packet_time=None)
+    payload = random.Random(5).randbytes(20_000)
+    run = QueuedRun(payload, cfg, cfg, [damage_nth(b"D", {2}, "ab", 40)])
+    assert run.read_all()[0] == payload
+    assert max(len(p) for _, p in run.link.sent["ab"]) > 4096
+    assert (run.a.statistics().repairs_sent, run.a.statistics().retransmissions) == (0, 1)
