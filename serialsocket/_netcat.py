@@ -229,6 +229,7 @@ class _Tally:
             "repaired": st.repaired,
             "repairs_sent": st.repairs_sent,
             "repairs_failed": st.repairs_failed,
+            "duplicate_acks_held": st.duplicate_acks_held,
             "garbage_bytes": st.garbage_bytes,
             "smoothed_rtt_s": None if st.smoothed_rtt is None else round(st.smoothed_rtt, 3),
             "window": st.effective_window,

@@ -258,7 +258,9 @@ class Sender:
             self.schedule(seq)
             self.fast_retransmit_count += 1
 
-    def on_nak(self, seq_mod: int, now: float, min_rtt: float) -> None:
+    def on_nak(
+        self, seq_mod: int, now: float, min_rtt: float, *, first_min_rtt: float | None = None
+    ) -> None:
         """Apply a NAK: resend that packet unless our last copy is still on its way.
 
         Args:
@@ -267,6 +269,9 @@ class Sender:
             min_rtt: the least time from a copy finishing leaving the UART to a
                 NAK provoked by that copy (two delays plus the NAK's transmit
                 time); a NAK sooner than that is about an earlier copy.
+            first_min_rtt: the same for a packet sent once (there is no
+                earlier copy; a NAK may still come before it could have
+                arrived): None is ``min_rtt``.
         """
         seq = self.resolve(seq_mod)
         if seq is None:
@@ -286,6 +291,8 @@ class Sender:
         pkt = self.outstanding[seq]
         if pkt.acked or pkt.deadline is None:
             return
+        if pkt.transmissions == 1 and first_min_rtt is not None:
+            min_rtt = first_min_rtt
         if now - pkt.done_at >= min_rtt:
             self.schedule(seq)
 

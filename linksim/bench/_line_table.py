@@ -624,7 +624,14 @@ def _run_row(
                     + ("" if got == data[: len(got)] else ", not the file's")
                 )
         stats = _connect_stats(work / "connect")
-        for key in ("retransmissions", "timeouts", "wire_bytes_sent", "packets_sent"):
+        for key in (
+            "retransmissions",
+            "timeouts",
+            "wire_bytes_sent",
+            "packets_sent",
+            "corrected_sent",
+            "repairs_sent",
+        ):
             record[key] = stats.get(key)
         if not record["ok"]:
             record["connect_stderr"] = _text(work / "connect")[-_TAIL:]

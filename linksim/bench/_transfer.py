@@ -271,6 +271,7 @@ def simulate(
     first_flight: bool = False,
     correction: bool = False,
     max_packet_time: float | None = EndpointConfig().max_packet_time,
+    far_eof: bool = False,
 ) -> Measurement:
     """Send ``payload`` from end a to end b over the impaired line; measure it.
 
@@ -289,6 +290,9 @@ def simulate(
             (serialsocket/PROTOCOL.md 15), as the netcat does.
         max_packet_time: the longest line time of one data packet with the
             length measured (the library's default; the netcat sets None).
+        far_eof: end b half-closes as soon as it is connected, as a netcat
+            listener with nothing to send does (its EOF and the copies and
+            resends of it cross the data, and end a acknowledges them).
         time_cap: stop after this many virtual seconds of data transfer and
             report what was delivered (``complete=False``); it bounds the
             CPU spent on hopeless combinations (long packets at high error
@@ -336,7 +340,11 @@ def simulate(
     end = "complete"
     first_byte: float | None = None
     early = 0
+    b_eof = False
     while len(got) < size:
+        if far_eof and b.state is State.ESTABLISHED and not b_eof:
+            b.send_eof(now)
+            b_eof = True
         if start is None and a.state is State.ESTABLISHED:
             start = now
             cap_at = now + time_cap

@@ -24,6 +24,7 @@ from serialsocket._params import negotiate
 from serialsocket._wire import PacketType
 from serialsocket.packets import (
     EIGHT_BIT_CLEAN,
+    PRINTABLE,
     BlockCheck,
     InitParameters,
     Packet,
@@ -473,3 +474,85 @@ def test_a_packet_longer_than_a_repair_can_name_is_resent_whole() -> None:
     assert run.read_all()[0] == payload
     assert max(len(p) for _, p in run.link.sent["ab"]) > 4096
     assert (run.a.statistics().repairs_sent, run.a.statistics().retransmissions) == (0, 1)
+
+
+def test_a_nak_for_a_packet_sent_once_brings_its_repair_at_once() -> None:
+    """A packet sent once has no earlier copy for a NAK to be about: with
+    repairs agreed its first resend (a repair packet) goes whatever the NAK
+    horizon says; without, the horizon still sets early NAKs aside.  (Judged
+    by a model of the line running late, the NAK for the last packet of a
+    transfer was set aside and its repair waited 1.6 s for the next ACK.)"""
+    from dataclasses import replace
+
+    from .simlink import MOON_HINTS, connected_pair, split_packets
+
+    for correction in (True, False):
+        cfg = replace(MOON_HINTS, correction=correction)
+        a, _, link = connected_pair(cfg, cfg)
+        now = link.now
+        a.send(random.Random(2).randbytes(2000), now)
+        first = next(p for p in split_packets(a.data_to_send(now)) if p[3:4] == b"D")
+        later = now + 1.0  # past its line time, well inside the horizon (2.6 s and more)
+        head = first[7:9] if a.statistics().long_sequence else b""  # (extended header)
+        nak = build_packet(
+            Packet(seq=first[2] - 32, type=PacketType.NAK, data=head),
+            BlockCheck.CRC16,
+        )
+        a.receive_data(nak, later)
+        sent = [p[3:4] for p in split_packets(a.data_to_send(later))]
+        assert (b"r" in sent) is correction, (correction, sent)
+        assert a.statistics().repairs_sent == int(correction)
+
+
+def test_a_copy_of_a_packet_just_acknowledged_is_not_acknowledged_again() -> None:
+    """The listener's EOF and its copies cross our data: a copy that arrives
+    before our ACK could have reached the peer draws no second ACK (a netcat
+    listener's EOF drew eight, 0.5 s of a 2400 bit/s line); one that arrives
+    later does, in case our ACK was lost."""
+    from .simlink import connected_pair, split_packets
+
+    a, b, link = connected_pair()
+    now = link.now
+    b.send_eof(now)
+    eof = next(p for p in split_packets(b.data_to_send(now)) if p[3:4] == b"Z")
+    srtt = a.statistics().smoothed_rtt
+    assert srtt is not None
+
+    def acks_at(t: float) -> int:
+        a.receive_data(eof, t)
+        return [p[3:4] for p in split_packets(a.data_to_send(t))].count(b"Y")
+
+    assert acks_at(now + 1.0) == 1
+    assert acks_at(now + 1.05) == 0  # an idle copy behind it
+    assert acks_at(now + 1.0 + 0.8 * srtt) == 0  # a resend our ACK could not have stopped
+    assert a.statistics().duplicate_acks_held == 2
+    assert acks_at(now + 1.0 + 1.0 * srtt) == 1  # our ACK may have been lost
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_netcat_table_lines_deliver_exactly_against_a_half_closed_listener(seed: int) -> None:
+    """As the netcat runs them (no hints, a first flight, dense, sums and
+    repairs), against a listener that half-closes at once, as a netcat
+    listener with nothing to send does: every byte once, in order, on a
+    1e-3 line at 1.3 s and on a printable one at 1e-4."""
+    for ber, encoding in ((1e-3, EIGHT_BIT_CLEAN), (1e-4, PRINTABLE)):
+        payload = random.Random(seed).randbytes(8192)
+        m = simulate(
+            payload,
+            rate=2400,
+            delay=1.3,
+            byte_error_rate=ber,
+            burst=None,
+            window=31,
+            max_len=None,
+            encoding=encoding,
+            seed=seed,
+            time_cap=600,
+            hints="none",
+            dense=True,
+            first_flight=True,
+            correction=True,
+            max_packet_time=None,
+            far_eof=True,
+        )
+        assert (m.end, m.ok, m.delivered) == ("complete", True, 8192), (ber, m)
