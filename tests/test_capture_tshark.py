@@ -424,3 +424,24 @@ def test_plain_tcp_capture_on_port_7010(tmp_path: pathlib.Path) -> None:
     assert words == [3.0, 0.25] + [0.0] * 16
     text = tshark(path, "-V", "-Y", "frame.number == 5", home=tmp_path)
     assert "tcpstream COMMAND #42 rid=42 MOVE_JOINT" in text
+
+
+def test_corrected_and_repair_packets_are_named(tmp_path: pathlib.Path) -> None:
+    """``d`` and ``r`` packets (PROTOCOL.md 15) are named, not "Unknown type"."""
+    from serialsocket.packets import BlockCheck, build_corrected, repair_field
+
+    plain = build_packet(Packet(seq=9, type="D", data=b"hello" * 30))
+    corrected = build_corrected(10, b"world" * 30, BlockCheck.CRC16)
+    repair = build_packet(Packet(seq=9, type="r", data=repair_field(plain[:-1], 3)))
+    path = tmp_path / "sums.pcapng"
+    writer = PcapngWriter()
+    out = writer.header() + writer.add_interface(Interface("/dev/ttyS0", LINKTYPE_SERIAL))[1]
+    out += writer.packet(0, corrected + repair, EPOCH, Direction.OUTBOUND)
+    path.write_bytes(out)
+    [row] = fields(path, ["telelink.type", "telelink.check.good"], tmp_path)
+    assert row["telelink.type"] == "d|r"
+    assert row["telelink.check.good"] == "1|1"
+    text = tshark(path, "-V", home=tmp_path)
+    assert "Data with sums (corrected data packet, PROTOCOL.md 15)" in text
+    assert "Repair (the sums of a damaged D packet, PROTOCOL.md 15.6)" in text
+    assert "Unknown type" not in text

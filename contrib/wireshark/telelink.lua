@@ -95,6 +95,8 @@ local TYPE_NAMES = {
     S = "Send-Init", F = "File header", A = "Attributes", B = "End of transmission",
     X = "Text header", R = "Receive-Init", G = "Generic command", C = "Host command",
     Q = "Reserved", T = "Reserved",
+    d = "Data with sums (corrected data packet, PROTOCOL.md 15)",
+    r = "Repair (the sums of a damaged D packet, PROTOCOL.md 15.6)",
 }
 
 local f = {
@@ -456,7 +458,8 @@ local function add_packet(buf, pinfo, tree, bytes, pos, total, has_eol, summary)
     -- Long sequence numbers: the data field starts with the 12 high bits.
     local full, width, modulus = seq, 1, 64
     if long and not init and dlen >= 2
-        and (type_char == "D" or type_char == "Z" or type_char == "N" or type_char == "Y") then
+        and (type_char == "D" or type_char == "Z" or type_char == "N" or type_char == "Y"
+            or type_char == "d" or type_char == "r") then
         full = base64_number(bytes, dstart + 1, 2) * 64 + seq
         t:add(f.seq_long, buf:range(dstart, 2), full)
         dstart, dlen = dstart + 2, dlen - 2
