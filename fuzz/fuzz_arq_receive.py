@@ -24,7 +24,9 @@ with the agreed encoding (after the two high sequence characters, from the
 input, when long sequence numbers are agreed); with corrected data packets
 agreed it may send that ``D`` as a ``d`` packet (sums behind its data) with
 one character replaced by the input's, which the receiver repairs or
-rejects.  Properties (any violation raises):
+rejects, or send it damaged the same way and then the repair packet for it
+(``r``, PROTOCOL.md 15.6), which the receiver mends it by or answers; op 0
+forges ``r`` packets of any content too.  Properties (any violation raises):
 
 * ``receive_data``, ``handle_timer``, ``data_to_send``, ``read`` and
   ``statistics`` never raise, whatever arrives: a bad packet is counted;
