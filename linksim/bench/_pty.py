@@ -34,6 +34,7 @@ import cProfile
 import hashlib
 import multiprocessing
 import os
+import signal
 import statistics
 import time
 from collections.abc import AsyncIterator, Sequence
@@ -215,16 +216,27 @@ async def _with_receiver(
         process = _SPAWN.Process(
             target=_receiver_process, args=(far_name, config, report), daemon=True
         )
-        process.start()
+        # Started with Ctrl-C ignored, which it keeps: the terminal sends it
+        # to the whole process group, and an interrupted run is this
+        # process's to report (the child, killed below, would print a
+        # traceback from wherever it was, its imports included).
+        interrupt = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            process.start()
+        finally:
+            signal.signal(signal.SIGINT, interrupt)
         report.close()  # the child's copy is the only writer: its death reads as EOF
+        done = False
         try:
             if listener is not None:
                 # (Bounded by the caller's _LIMIT, should the child never connect.)
                 near = await stack.enter_async_context(await listener.accept())
             yield near
+            done = True
         finally:
-            with trio.CancelScope(shield=True):
-                await trio.to_thread.run_sync(process.join, _CHILD_GRACE)
+            if done:
+                with trio.CancelScope(shield=True):
+                    await trio.to_thread.run_sync(process.join, _CHILD_GRACE)
             if process.is_alive():
                 process.kill()
                 process.join()

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -143,3 +147,57 @@ def test_the_receiving_process_reports_its_failure_in_its_own_words() -> None:
     end.close()
     with pytest.raises(AssertionError, match="ended without a report"):
         _read_report(reports)
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (Linux /proc)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            with contextlib.suppress(OSError), open(f"/proc/{entry}/stat") as stat:
+                if int(stat.read().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry))
+    return found
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs /proc to find the child")
+def test_ctrl_c_during_a_two_process_run_is_reported_once_and_quietly() -> None:
+    """Ctrl-C reaches the whole process group: the receiving process ignores
+    it (it printed a traceback from wherever it was, its imports included)
+    and is killed; the bench says "interrupted" and exits 130."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "linksim", "bench", "pty", "--size", "50000000", "--runs", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not _children(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        children = _children(proc.pid)
+        assert children, "the receiving process never started"
+        time.sleep(0.5)  # into the transfer (or the child's imports: either way)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert b"Traceback" not in err, err.decode()
+    assert b"interrupted" in err
+    # (multiprocessing's resource tracker ends when it reads the end of its pipe.)
+    deadline = time.monotonic() + 10
+    while any(_alive(c) for c in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [c for c in children if _alive(c)]
+
+
+def _alive(pid: int) -> bool:
+    """``pid`` runs (a zombie, or a process gone, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
