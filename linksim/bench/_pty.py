@@ -39,6 +39,7 @@ import statistics
 import time
 from collections.abc import AsyncIterator, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
 
 import trio
@@ -216,15 +217,20 @@ async def _with_receiver(
         process = _SPAWN.Process(
             target=_receiver_process, args=(far_name, config, report), daemon=True
         )
-        # Started with Ctrl-C ignored, which it keeps: the terminal sends it
-        # to the whole process group, and an interrupted run is this
-        # process's to report (the child, killed below, would print a
-        # traceback from wherever it was, its imports included).
-        interrupt = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # Started with Ctrl-C blocked, which it inherits and keeps: the
+        # terminal sends it to the whole process group, and an interrupted
+        # run is this process's to report (the child, killed below, would
+        # print a traceback from wherever it was, its imports included).
+        # Blocked here, not ignored: one that comes meanwhile waits, then
+        # interrupts us.
+        # (multiprocessing's resource tracker, started by the first start,
+        # unblocks the signals it blocks around its own start: start it first.)
+        resource_tracker.ensure_running()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             process.start()
         finally:
-            signal.signal(signal.SIGINT, interrupt)
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         report.close()  # the child's copy is the only writer: its death reads as EOF
         done = False
         try:
