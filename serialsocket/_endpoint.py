@@ -2332,7 +2332,7 @@ class Endpoint:
         :data:`DUP_ACK_SLACK` round trips ago: a copy arriving now was sent
         before that ACK could have reached the peer (an idle copy, or a
         resend behind our queue), so another ACK would say nothing new and
-        take the line from our data (PROTOCOL.md 4.4)."""
+        take the line from our data (PROTOCOL.md 4.2)."""
         at = self._acked_at.get(seq_mod)
         srtt = self._rtt.srtt
         return at is not None and srtt is not None and now - at < DUP_ACK_SLACK * srtt

@@ -5,7 +5,8 @@ from __future__ import annotations
 import errno
 import pathlib
 import termios
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
 
 import pytest
 import trio
@@ -209,24 +210,29 @@ def test_one_receiver_and_one_sender_at_a_time() -> None:
     run(main)
 
 
+@asynccontextmanager
+async def _socket_url_port() -> AsyncIterator[tuple[SerialPort, trio.SocketListener]]:
+    """A ``socket://`` port to a loopback listener, whose peer is still to accept."""
+    listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
+    addr = listeners[0].socket.getsockname()
+    async with listeners[0] as listener, await open_port(f"socket://{addr[0]}:{addr[1]}") as port:
+        yield port, listener
+
+
 def test_socket_url_reads_a_burst_in_a_few_hand_offs() -> None:
     """pyserial's socket:// says in_waiting is 0 or 1; reading 1 + in_waiting
     moved at most two bytes per hand-off to trio (20 KB: ~10 000 of them)."""
     payload = bytes(range(256)) * 80  # 20 480 bytes
 
     async def main() -> None:
-        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
-        addr = listeners[0].socket.getsockname()
-        async with listeners[0] as listener:
-            port = await open_port(f"socket://{addr[0]}:{addr[1]}")
-            async with port:
-                peer = await listener.accept()
-                await peer.send_all(payload)
-                assert await read_exactly(port, len(payload)) == payload
-                # Each read returned one hand-off's worth (read_exactly asks
-                # for everything still missing, so reads == hand-offs).
-                assert port.statistics().reads <= 50, port.statistics()
-                await peer.aclose()
+        async with _socket_url_port() as (port, listener):
+            peer = await listener.accept()
+            await peer.send_all(payload)
+            assert await read_exactly(port, len(payload)) == payload
+            # Each read returned one hand-off's worth (read_exactly asks
+            # for everything still missing, so reads == hand-offs).
+            assert port.statistics().reads <= 50, port.statistics()
+            await peer.aclose()
 
     run(main)
 
@@ -238,25 +244,21 @@ def test_socket_url_reads_what_tcp_has_queued_in_one_call() -> None:
     payload = bytes(range(256)) * 80  # 20 480 bytes
 
     async def main() -> None:
-        listeners = await trio.open_tcp_listeners(0, host="127.0.0.1")
-        addr = listeners[0].socket.getsockname()
-        async with listeners[0] as listener:
-            port = await open_port(f"socket://{addr[0]}:{addr[1]}")
-            async with port:
-                reads = 0
-                read = port.serial.read
+        async with _socket_url_port() as (port, listener):
+            reads = 0
+            read = port.serial.read
 
-                def counted(size: int = 1) -> bytes:
-                    nonlocal reads
-                    reads += 1
-                    return bytes(read(size))
+            def counted(size: int = 1) -> bytes:
+                nonlocal reads
+                reads += 1
+                return bytes(read(size))
 
-                port.serial.read = counted  # the reader thread's next read is counted
-                peer = await listener.accept()
-                await peer.send_all(payload)
-                assert await read_exactly(port, len(payload)) == payload
-                assert reads <= 100, reads
-                await peer.aclose()
+            port.serial.read = counted  # the reader thread's next read is counted
+            peer = await listener.accept()
+            await peer.send_all(payload)
+            assert await read_exactly(port, len(payload)) == payload
+            assert reads <= 100, reads
+            await peer.aclose()
 
     run(main)
 
